@@ -1,0 +1,13 @@
+#!/usr/bin/env bash
+# The whole test suite: unit + integration tests of every workspace crate, formatting and lints.
+# Assumes scripts/setup.sh has run (README's command 2 runs both).
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+export CARGO_TERM_COLOR="${CARGO_TERM_COLOR:-never}"
+echo "== cargo fmt --check"
+cargo fmt --all --check
+echo "== cargo clippy"
+cargo clippy --workspace --all-targets --locked -- -D warnings
+echo "== cargo test"
+cargo test --workspace --locked
+echo "== all checks passed"
