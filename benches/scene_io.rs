@@ -23,7 +23,11 @@ fn large_model_read(c: &mut Criterion) {
     write_model(dir.path(), &model, ModelFormat::Binary).expect("write model");
     let bytes: u64 = ["cameras.bin", "images.bin", "points3D.bin"]
         .iter()
-        .map(|f| std::fs::metadata(dir.path().join(f)).map(|m| m.len()).unwrap_or(0))
+        .map(|f| {
+            std::fs::metadata(dir.path().join(f))
+                .map(|m| m.len())
+                .unwrap_or(0)
+        })
         .sum();
     eprintln!(
         "model: {} points, {} images, {} observations, {:.1} MB on disk",

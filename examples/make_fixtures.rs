@@ -9,7 +9,11 @@ use frond::scene::synthetic::{generate, render_point_splats, toy_scene_spec};
 use frond::scene::{ModelFormat, write_model};
 
 fn main() -> Result<()> {
-    let root = PathBuf::from(std::env::args().nth(1).unwrap_or_else(|| "fixtures/toy_scene".into()));
+    let root = PathBuf::from(
+        std::env::args()
+            .nth(1)
+            .unwrap_or_else(|| "fixtures/toy_scene".into()),
+    );
     let model = generate(&toy_scene_spec());
     write_model(&root.join("sparse/0"), &model, ModelFormat::Binary)
         .with_context(|| format!("writing {}", root.display()))?;

@@ -7,7 +7,9 @@ use frond::scene::synthetic::{generate, toy_scene_spec};
 use frond::scene::{ModelFormat, read_model};
 
 fn fixture(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures").join(name)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("fixtures")
+        .join(name)
 }
 
 fn frond() -> Command {
@@ -36,7 +38,11 @@ fn info_reports_the_fixture_as_json() {
         .arg(fixture("toy_scene"))
         .output()
         .unwrap();
-    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
     let json: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
     let spec = toy_scene_spec();
     assert_eq!(json["images"]["registered"], spec.num_images);
@@ -45,16 +51,30 @@ fn info_reports_the_fixture_as_json() {
     assert_eq!(json["camera_models"]["SIMPLE_RADIAL"], 1);
     let stored = json["reprojection"]["stored_mean_px"].as_f64().unwrap();
     let recomputed = json["reprojection"]["recomputed_mean_px"].as_f64().unwrap();
-    assert!((stored - recomputed).abs() < 1e-9, "{stored} vs {recomputed}");
+    assert!(
+        (stored - recomputed).abs() < 1e-9,
+        "{stored} vs {recomputed}"
+    );
     assert_eq!(json["source"]["layout"], "project");
 }
 
 #[test]
 fn info_text_output_names_the_essentials() {
-    let output = frond().arg("info").arg(fixture("toy_scene")).output().unwrap();
+    let output = frond()
+        .arg("info")
+        .arg(fixture("toy_scene"))
+        .output()
+        .unwrap();
     assert!(output.status.success());
     let text = String::from_utf8(output.stdout).unwrap();
-    for needle in ["cameras:", "images:", "points:", "reprojection:", "bounds:", "SIMPLE_RADIAL"] {
+    for needle in [
+        "cameras:",
+        "images:",
+        "points:",
+        "reprojection:",
+        "bounds:",
+        "SIMPLE_RADIAL",
+    ] {
         assert!(text.contains(needle), "missing {needle} in\n{text}");
     }
 }

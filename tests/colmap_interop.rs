@@ -49,7 +49,11 @@ fn analyze(dir: &Path) -> HashMap<String, f64> {
 
 fn check_analyzer_counts(dir: &Path, model: &Reconstruction) {
     let stats = analyze(dir);
-    assert_eq!(stats["Cameras"] as usize, model.cameras().len(), "{stats:?}");
+    assert_eq!(
+        stats["Cameras"] as usize,
+        model.cameras().len(),
+        "{stats:?}"
+    );
     assert_eq!(stats["Images"] as usize, model.images().len());
     assert_eq!(stats["Registered images"] as usize, model.images().len());
     assert_eq!(stats["Points"] as usize, model.points().len());
@@ -124,7 +128,10 @@ fn assert_models_equal(a: &Reconstruction, b: &Reconstruction, kind: CameraModel
         assert_eq!(other.model, camera.model);
         assert_eq!((other.width, other.height), (camera.width, camera.height));
         for (x, y) in other.params().iter().zip(camera.params()) {
-            assert!((x - y).abs() <= 1e-15 * y.abs().max(1.0), "{kind}: {x} vs {y}");
+            assert!(
+                (x - y).abs() <= 1e-15 * y.abs().max(1.0),
+                "{kind}: {x} vs {y}"
+            );
         }
     }
     assert_eq!(a.images().len(), b.images().len());
@@ -160,7 +167,8 @@ fn frond_reads_a_real_colmap_model_converted_to_text_like_the_binary() {
     if !colmap_available() {
         return;
     }
-    let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/colmap_figurine/sparse/0");
+    let input =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/colmap_figurine/sparse/0");
     let out = tempfile::tempdir().unwrap();
     run_colmap(&[
         "model_converter",

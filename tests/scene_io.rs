@@ -135,7 +135,8 @@ fn figurine_project_layout_picks_sparse_zero_and_reports_missing_images() {
 fn bust_text_and_binary_agree_within_text_rounding() {
     let dir = shared_data("colmap_bust_txt_bin/sparse/0");
     let read = |name: &str| std::fs::read(dir.join(name)).unwrap();
-    let cameras_bin = io_binary::parse_cameras(&read("cameras.bin"), Path::new("cameras.bin")).unwrap();
+    let cameras_bin =
+        io_binary::parse_cameras(&read("cameras.bin"), Path::new("cameras.bin")).unwrap();
     let cameras_txt = io_text::parse_cameras(
         &String::from_utf8(read("cameras.txt")).unwrap(),
         Path::new("cameras.txt"),
@@ -144,12 +145,16 @@ fn bust_text_and_binary_agree_within_text_rounding() {
     assert_eq!(cameras_bin.len(), 1);
     assert_eq!(cameras_txt.len(), 1);
     let (b, t) = (&cameras_bin[0], &cameras_txt[0]);
-    assert_eq!((b.id, b.model, b.width, b.height), (t.id, t.model, t.width, t.height));
+    assert_eq!(
+        (b.id, b.model, b.width, b.height),
+        (t.id, t.model, t.width, t.height)
+    );
     for (x, y) in b.params().iter().zip(t.params()) {
         assert!((x - y).abs() <= 1e-5 * x.abs().max(1e-3), "{x} vs {y}");
     }
 
-    let points_bin = io_binary::parse_points(&read("points3D.bin"), Path::new("points3D.bin")).unwrap();
+    let points_bin =
+        io_binary::parse_points(&read("points3D.bin"), Path::new("points3D.bin")).unwrap();
     let points_txt = io_text::parse_points(
         &String::from_utf8(read("points3D.txt")).unwrap(),
         Path::new("points3D.txt"),
@@ -165,7 +170,11 @@ fn bust_text_and_binary_agree_within_text_rounding() {
         assert_eq!(b.track, t.track);
         for axis in 0..3 {
             let (x, y) = (b.position_world[axis], t.position_world[axis]);
-            assert!((x - y).abs() <= 1e-5 * x.abs().max(1e-2), "point {}: {x} vs {y}", b.id);
+            assert!(
+                (x - y).abs() <= 1e-5 * x.abs().max(1e-2),
+                "point {}: {x} vs {y}",
+                b.id
+            );
         }
         assert!((b.error - t.error).abs() <= 1e-5 * b.error.abs().max(1e-2));
     }
@@ -178,7 +187,9 @@ fn incomplete_model_folder_is_a_clear_error() {
         .to_string();
     assert!(err.contains("incomplete COLMAP model"), "{err}");
     assert!(err.contains("points3D.bin"), "{err}");
-    let err = Scene::open(Path::new("/definitely/not/here")).unwrap_err().to_string();
+    let err = Scene::open(Path::new("/definitely/not/here"))
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("does not exist"), "{err}");
 }
 
@@ -248,7 +259,9 @@ fn every_truncation_of_every_binary_file_is_an_error_not_a_panic() {
                 "frames.bin" => io_binary::parse_frames(data, path).map(|_| ()),
                 other => panic!("unexpected file {other}"),
             };
-            let err = result.expect_err("truncated file must not parse").to_string();
+            let err = result
+                .expect_err("truncated file must not parse")
+                .to_string();
             assert!(err.starts_with(name), "{err}");
         }
     }
@@ -277,7 +290,12 @@ fn explicit_model_and_images_layout() {
     let images = shared_data("colmap_figurine/dense/0/images");
     let source = SceneSource::explicit(&model_dir, Some(&images)).unwrap();
     let scene = Scene::from_source(source).unwrap();
-    assert!(scene.image_path(&scene.reconstruction.images()[0]).unwrap().is_file());
+    assert!(
+        scene
+            .image_path(&scene.reconstruction.images()[0])
+            .unwrap()
+            .is_file()
+    );
     assert!(SceneSource::explicit(&shared_data("colmap_figurine"), None).is_err());
     assert!(io::detect_format(&model_dir).is_some());
 }

@@ -10,7 +10,11 @@ use indicatif::{ProgressBar, ProgressStyle};
 use frond::scene::{ModelFormat, Scene, SceneSource, stats, write_model};
 
 #[derive(Parser)]
-#[command(name = "frond", version, about = "Image-based plant modeling from COLMAP reconstructions")]
+#[command(
+    name = "frond",
+    version,
+    about = "Image-based plant modeling from COLMAP reconstructions"
+)]
 struct Cli {
     /// More log output (-v info, -vv debug); RUST_LOG overrides.
     #[arg(short, long, action = clap::ArgAction::Count, global = true)]

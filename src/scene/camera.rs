@@ -73,7 +73,9 @@ impl CameraModelKind {
 
     /// The model with COLMAP's numeric id, if Frond supports it.
     pub fn from_id(id: i32) -> Option<Self> {
-        usize::try_from(id).ok().and_then(|i| Self::ALL.get(i).copied())
+        usize::try_from(id)
+            .ok()
+            .and_then(|i| Self::ALL.get(i).copied())
     }
 
     /// COLMAP's model name, as written in `cameras.txt`.
@@ -355,9 +357,7 @@ impl Camera {
             CameraModelKind::SimplePinhole | CameraModelKind::Pinhole | CameraModelKind::Fov => {
                 Vector2::zeros()
             }
-            CameraModelKind::SimpleRadial | CameraModelKind::SimpleRadialFisheye => {
-                p * (e[0] * r2)
-            }
+            CameraModelKind::SimpleRadial | CameraModelKind::SimpleRadialFisheye => p * (e[0] * r2),
             CameraModelKind::Radial | CameraModelKind::RadialFisheye => {
                 p * (e[0] * r2 + e[1] * r2 * r2)
             }
@@ -536,8 +536,7 @@ mod tests {
                 vec![0.05, 0.01, 0.005, 0.005, 0.002, 0.001, 0.005, 0.005]
             }
             CameraModelKind::RadTanThinPrismFisheye => vec![
-                0.05, 0.01, 0.002, 0.001, 0.0005, 0.0002, 0.005, 0.005, 0.005, 0.001, 0.005,
-                0.001,
+                0.05, 0.01, 0.002, 0.001, 0.0005, 0.0002, 0.005, 0.005, 0.005, 0.001, 0.005, 0.001,
             ],
             _ => vec![0.1, 0.02, 0.01, 0.01],
         }
@@ -568,7 +567,13 @@ mod tests {
     fn rejects_bad_intrinsics() {
         let err = Camera::new(1, CameraModelKind::Pinhole, 10, 10, vec![1.0, 1.0, 5.0]);
         assert!(matches!(err, Err(CameraError::ParamCount { got: 3, .. })));
-        let err = Camera::new(1, CameraModelKind::SimplePinhole, 10, 10, vec![f64::NAN, 5., 5.]);
+        let err = Camera::new(
+            1,
+            CameraModelKind::SimplePinhole,
+            10,
+            10,
+            vec![f64::NAN, 5., 5.],
+        );
         assert!(matches!(err, Err(CameraError::NonFinite { index: 0, .. })));
         let err = Camera::new(1, CameraModelKind::SimplePinhole, 10, 10, vec![-3., 5., 5.]);
         assert!(matches!(err, Err(CameraError::Focal(_))));

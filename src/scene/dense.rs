@@ -60,7 +60,11 @@ pub fn read_fused(ply_path: &Path, model: &Reconstruction) -> SceneResult<DenseP
         }
         positions_world.push(p);
     }
-    let normals_world = match (vertex.column("nx"), vertex.column("ny"), vertex.column("nz")) {
+    let normals_world = match (
+        vertex.column("nx"),
+        vertex.column("ny"),
+        vertex.column("nz"),
+    ) {
         (Some(nx), Some(ny), Some(nz)) => Some(
             (0..vertex.count)
                 .map(|i| {
@@ -150,7 +154,11 @@ pub fn parse_visibility(
         let n = read_u32(pos, &record)? as usize;
         pos += 4;
         if n.saturating_mul(4) > bytes.len() - pos {
-            return Err(err(pos, record(), format!("{n} images cannot fit in the file")));
+            return Err(err(
+                pos,
+                record(),
+                format!("{n} images cannot fit in the file"),
+            ));
         }
         let mut ids = Vec::with_capacity(n);
         for _ in 0..n {

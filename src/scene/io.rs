@@ -83,7 +83,8 @@ fn read_text(path: &Path) -> SceneResult<String> {
 
 /// Reads the complete model in `dir` and validates it.
 pub fn read_model(dir: &Path) -> SceneResult<(Reconstruction, ModelFormat)> {
-    let format = detect_format(dir).ok_or_else(|| SceneError::layout(dir, describe_missing(dir)))?;
+    let format =
+        detect_format(dir).ok_or_else(|| SceneError::layout(dir, describe_missing(dir)))?;
     let model = read_model_with_format(dir, format)?;
     Ok((model, format))
 }
@@ -94,50 +95,57 @@ pub fn read_model_with_format(dir: &Path, format: ModelFormat) -> SceneResult<Re
     let (cameras_path, images_path, points_path) =
         (file("cameras"), file("images"), file("points3D"));
     let (rigs_path, frames_path) = (file("rigs"), file("frames"));
-    let (cameras, mut images, points, rigs, frames) = match format {
-        ModelFormat::Binary => {
-            let cameras = io_binary::parse_cameras(&read_file(&cameras_path)?, &cameras_path)?;
-            let images = io_binary::parse_images(&read_file(&images_path)?, &images_path)?;
-            let points = io_binary::parse_points(&read_file(&points_path)?, &points_path)?;
-            let rigs = if rigs_path.is_file() {
-                io_binary::parse_rigs(&read_file(&rigs_path)?, &rigs_path)?
-            } else {
-                Vec::new()
-            };
-            let frames = if frames_path.is_file() {
+    // The three core files are read and parsed concurrently.
+    let ((cameras, images), points) = match format {
+        ModelFormat::Binary => rayon::join(
+            || {
+                rayon::join(
+                    || io_binary::parse_cameras(&read_file(&cameras_path)?, &cameras_path),
+                    || io_binary::parse_images(&read_file(&images_path)?, &images_path),
+                )
+            },
+            || io_binary::parse_points(&read_file(&points_path)?, &points_path),
+        ),
+        ModelFormat::Text => rayon::join(
+            || {
+                rayon::join(
+                    || io_text::parse_cameras(&read_text(&cameras_path)?, &cameras_path),
+                    || io_text::parse_images(&read_text(&images_path)?, &images_path),
+                )
+            },
+            || io_text::parse_points(&read_text(&points_path)?, &points_path),
+        ),
+    };
+    let (cameras, mut images, points) = (cameras?, images?, points?);
+    let rigs = if rigs_path.is_file() {
+        match format {
+            ModelFormat::Binary => io_binary::parse_rigs(&read_file(&rigs_path)?, &rigs_path)?,
+            ModelFormat::Text => io_text::parse_rigs(&read_text(&rigs_path)?, &rigs_path)?,
+        }
+    } else {
+        Vec::new()
+    };
+    let frames = if frames_path.is_file() {
+        match format {
+            ModelFormat::Binary => {
                 io_binary::parse_frames(&read_file(&frames_path)?, &frames_path)?
-            } else {
-                Vec::new()
-            };
-            (cameras, images, points, rigs, frames)
+            }
+            ModelFormat::Text => io_text::parse_frames(&read_text(&frames_path)?, &frames_path)?,
         }
-        ModelFormat::Text => {
-            let cameras = io_text::parse_cameras(&read_text(&cameras_path)?, &cameras_path)?;
-            let images = io_text::parse_images(&read_text(&images_path)?, &images_path)?;
-            let points = io_text::parse_points(&read_text(&points_path)?, &points_path)?;
-            let rigs = if rigs_path.is_file() {
-                io_text::parse_rigs(&read_text(&rigs_path)?, &rigs_path)?
-            } else {
-                Vec::new()
-            };
-            let frames = if frames_path.is_file() {
-                io_text::parse_frames(&read_text(&frames_path)?, &frames_path)?
-            } else {
-                Vec::new()
-            };
-            (cameras, images, points, rigs, frames)
-        }
+    } else {
+        Vec::new()
     };
     // COLMAP ≥ 3.12 ignores the pose stored in images.* when frames exist; so do we.
     compose_rig_poses(&mut images, &rigs, &frames).map_err(|source| SceneError::Model {
         path: frames_path.clone(),
         source,
     })?;
-    Reconstruction::from_parts_with_rigs(cameras, images, points, rigs, frames)
-        .map_err(|source| SceneError::Model {
+    Reconstruction::from_parts_with_rigs(cameras, images, points, rigs, frames).map_err(|source| {
+        SceneError::Model {
             path: dir.to_path_buf(),
             source,
-        })
+        }
+    })
 }
 
 /// Writes `model` into `dir` (created if needed) in `format`, each file atomically.

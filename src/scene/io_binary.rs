@@ -519,7 +519,9 @@ mod tests {
         let cameras = vec![Camera::simple_pinhole(42, 10, 10, 5.0)];
         let bytes = encode_cameras(&cameras);
         for cut in 1..bytes.len() {
-            let err = parse_cameras(&bytes[..cut], &path()).unwrap_err().to_string();
+            let err = parse_cameras(&bytes[..cut], &path())
+                .unwrap_err()
+                .to_string();
             assert!(err.starts_with("test.bin: byte"), "{err}");
         }
         let err = parse_cameras(&bytes[..bytes.len() - 3], &path())

@@ -12,8 +12,8 @@ use nalgebra::Point2;
 use super::camera::{Camera, CameraModelKind};
 use super::error::{Location, SceneError, SceneResult};
 use super::model::{
-    Frame, Image, Keypoint, Point3D, Reconstruction, Rig, SensorId, TrackElement,
-    isometry_from_qt, qt_from_isometry,
+    Frame, Image, Keypoint, Point3D, Reconstruction, Rig, SensorId, TrackElement, isometry_from_qt,
+    qt_from_isometry,
 };
 
 /// Tokens of one line, with enough context to report errors.
@@ -114,7 +114,11 @@ pub fn parse_cameras(text: &str, path: &Path) -> SceneResult<Vec<Camera>> {
         let model_name = line.token("MODEL")?;
         let model = CameraModelKind::from_name(model_name)
             .or_else(|| model_name.parse().ok().and_then(CameraModelKind::from_id))
-            .ok_or_else(|| line.error(format!("unknown or unsupported camera model '{model_name}'")))?;
+            .ok_or_else(|| {
+                line.error(format!(
+                    "unknown or unsupported camera model '{model_name}'"
+                ))
+            })?;
         let width: u64 = line.parse("WIDTH")?;
         let height: u64 = line.parse("HEIGHT")?;
         let params = line
@@ -158,7 +162,7 @@ pub fn parse_images(text: &str, path: &Path) -> SceneResult<Vec<Image>> {
         let (points_number, points_text) = lines.next().unwrap_or((number + 1, ""));
         let mut points_line = Line::new(path, points_number, points_text, record);
         let values = points_line.rest();
-        if values.len() % 3 != 0 {
+        if !values.len().is_multiple_of(3) {
             return Err(points_line.error(format!(
                 "keypoint line has {} values, not a multiple of 3 (X Y POINT3D_ID)",
                 values.len()
@@ -211,7 +215,7 @@ pub fn parse_points(text: &str, path: &Path) -> SceneResult<Vec<Point3D>> {
         let b: u8 = line.parse("B")?;
         let error = line.finite("ERROR")?;
         let rest = line.rest();
-        if rest.len() % 2 != 0 {
+        if !rest.len().is_multiple_of(2) {
             return Err(line.error(format!(
                 "track has {} values, not pairs of IMAGE_ID POINT2D_IDX",
                 rest.len()
@@ -220,15 +224,18 @@ pub fn parse_points(text: &str, path: &Path) -> SceneResult<Vec<Point3D>> {
         let track = rest
             .chunks_exact(2)
             .enumerate()
-            .map(|(e, pair)| {
-                match (pair[0].parse::<u32>(), pair[1].parse::<u32>()) {
+            .map(
+                |(e, pair)| match (pair[0].parse::<u32>(), pair[1].parse::<u32>()) {
                     (Ok(image_id), Ok(keypoint_index)) => Ok(TrackElement {
                         image_id,
                         keypoint_index,
                     }),
-                    _ => Err(line.error(format!("track element {e} '{} {}' is not two ids", pair[0], pair[1]))),
-                }
-            })
+                    _ => Err(line.error(format!(
+                        "track element {e} '{} {}' is not two ids",
+                        pair[0], pair[1]
+                    ))),
+                },
+            )
             .collect::<SceneResult<Vec<_>>>()?;
         points.push(Point3D {
             id,
@@ -542,6 +549,9 @@ mod tests {
         let err = parse_cameras("3 PANORAMA 640 480 500\n", Path::new("cameras.txt"))
             .unwrap_err()
             .to_string();
-        assert!(err.contains("unknown or unsupported camera model 'PANORAMA'"), "{err}");
+        assert!(
+            err.contains("unknown or unsupported camera model 'PANORAMA'"),
+            "{err}"
+        );
     }
 }

@@ -188,8 +188,13 @@ pub enum ImageFileStatus {
     Present,
     NoImagesFolder,
     Missing,
-    Unreadable { reason: String },
-    SizeMismatch { file: (u32, u32), camera: (u32, u32) },
+    Unreadable {
+        reason: String,
+    },
+    SizeMismatch {
+        file: (u32, u32),
+        camera: (u32, u32),
+    },
 }
 
 impl Scene {

@@ -7,10 +7,13 @@
 
 use std::collections::HashMap;
 
+use rayon::prelude::*;
+
 use nalgebra::{Isometry3, Point2, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::camera::{Camera, CameraId};
+use crate::util::id_hash::{IdMap, id_map_with_capacity};
 
 /// Identifier of a registered image (`image_t`, 32 bit).
 pub type ImageId = u32;
@@ -150,7 +153,9 @@ pub enum ModelError {
         name: String,
         camera_id: CameraId,
     },
-    #[error("image {image_id} keypoint {keypoint_index} names 3D point {point3d_id}, which is not in the model")]
+    #[error(
+        "image {image_id} keypoint {keypoint_index} names 3D point {point3d_id}, which is not in the model"
+    )]
     KeypointMissingPoint {
         image_id: ImageId,
         keypoint_index: usize,
@@ -162,7 +167,9 @@ pub enum ModelError {
         element: usize,
         image_id: ImageId,
     },
-    #[error("3D point {point3d_id} track element {element}: image {image_id} has {num_keypoints} keypoints, index {keypoint_index} is out of range")]
+    #[error(
+        "3D point {point3d_id} track element {element}: image {image_id} has {num_keypoints} keypoints, index {keypoint_index} is out of range"
+    )]
     TrackMissingKeypoint {
         point3d_id: Point3dId,
         element: usize,
@@ -170,7 +177,9 @@ pub enum ModelError {
         keypoint_index: u32,
         num_keypoints: usize,
     },
-    #[error("3D point {point3d_id} track element {element}: keypoint {keypoint_index} of image {image_id} belongs to {actual}")]
+    #[error(
+        "3D point {point3d_id} track element {element}: keypoint {keypoint_index} of image {image_id} belongs to {actual}"
+    )]
     TrackKeypointMismatch {
         point3d_id: Point3dId,
         element: usize,
@@ -184,7 +193,9 @@ pub enum ModelError {
     ImageWithoutFrame { image_id: ImageId, name: String },
     #[error("frame {frame_id} uses rig {rig_id}, which is not in the rigs file")]
     FrameMissingRig { frame_id: FrameId, rig_id: RigId },
-    #[error("frame {frame_id}: camera {camera_id} is not a sensor of rig {rig_id} or has no pose in it")]
+    #[error(
+        "frame {frame_id}: camera {camera_id} is not a sensor of rig {rig_id} or has no pose in it"
+    )]
     SensorWithoutPose {
         frame_id: FrameId,
         rig_id: RigId,
@@ -201,19 +212,19 @@ pub struct Reconstruction {
     rigs: Vec<Rig>,
     frames: Vec<Frame>,
     #[serde(skip)]
-    camera_index: HashMap<CameraId, usize>,
+    camera_index: IdMap<CameraId, usize>,
     #[serde(skip)]
-    image_index: HashMap<ImageId, usize>,
+    image_index: IdMap<ImageId, usize>,
     #[serde(skip)]
-    point_index: HashMap<Point3dId, usize>,
+    point_index: IdMap<Point3dId, usize>,
 }
 
 fn build_index<T, Id: std::hash::Hash + Eq + Copy + Into<u64>>(
     items: &[T],
     kind: &'static str,
     id_of: impl Fn(&T) -> Id,
-) -> Result<HashMap<Id, usize>, ModelError> {
-    let mut index = HashMap::with_capacity(items.len());
+) -> Result<IdMap<Id, usize>, ModelError> {
+    let mut index = id_map_with_capacity(items.len());
     for (i, item) in items.iter().enumerate() {
         let id = id_of(item);
         if index.insert(id, i).is_some() {
@@ -248,8 +259,11 @@ impl Reconstruction {
         frames: Vec<Frame>,
     ) -> Result<Self, ModelError> {
         let camera_index = build_index(&cameras, "camera", |c| c.id)?;
-        let image_index = build_index(&images, "image", |i| i.id)?;
-        let point_index = build_index(&points, "3D point", |p| p.id)?;
+        let (image_index, point_index) = rayon::join(
+            || build_index(&images, "image", |i| i.id),
+            || build_index(&points, "3D point", |p| p.id),
+        );
+        let (image_index, point_index) = (image_index?, point_index?);
         let model = Self {
             cameras,
             images,
@@ -265,61 +279,70 @@ impl Reconstruction {
     }
 
     fn validate(&self) -> Result<(), ModelError> {
-        for image in &self.images {
-            if !self.camera_index.contains_key(&image.camera_id) {
-                return Err(ModelError::MissingCamera {
+        self.images
+            .par_iter()
+            .try_for_each(|image| self.validate_image(image))?;
+        self.points
+            .par_iter()
+            .try_for_each(|point| self.validate_point(point))
+    }
+
+    fn validate_image(&self, image: &Image) -> Result<(), ModelError> {
+        if !self.camera_index.contains_key(&image.camera_id) {
+            return Err(ModelError::MissingCamera {
+                image_id: image.id,
+                name: image.name.clone(),
+                camera_id: image.camera_id,
+            });
+        }
+        for (keypoint_index, keypoint) in image.keypoints.iter().enumerate() {
+            if let Some(point3d_id) = keypoint.point3d_id
+                && !self.point_index.contains_key(&point3d_id)
+            {
+                return Err(ModelError::KeypointMissingPoint {
                     image_id: image.id,
-                    name: image.name.clone(),
-                    camera_id: image.camera_id,
+                    keypoint_index,
+                    point3d_id,
                 });
-            }
-            for (keypoint_index, keypoint) in image.keypoints.iter().enumerate() {
-                if let Some(point3d_id) = keypoint.point3d_id
-                    && !self.point_index.contains_key(&point3d_id)
-                {
-                    return Err(ModelError::KeypointMissingPoint {
-                        image_id: image.id,
-                        keypoint_index,
-                        point3d_id,
-                    });
-                }
             }
         }
-        for point in &self.points {
-            if !point.position_world.iter().all(|c| c.is_finite()) {
-                return Err(ModelError::NonFinitePoint {
+        Ok(())
+    }
+
+    fn validate_point(&self, point: &Point3D) -> Result<(), ModelError> {
+        if !point.position_world.iter().all(|c| c.is_finite()) {
+            return Err(ModelError::NonFinitePoint {
+                point3d_id: point.id,
+            });
+        }
+        for (element, t) in point.track.iter().enumerate() {
+            let Some(image) = self.image(t.image_id) else {
+                return Err(ModelError::TrackMissingImage {
                     point3d_id: point.id,
+                    element,
+                    image_id: t.image_id,
                 });
-            }
-            for (element, t) in point.track.iter().enumerate() {
-                let Some(image) = self.image(t.image_id) else {
-                    return Err(ModelError::TrackMissingImage {
-                        point3d_id: point.id,
-                        element,
-                        image_id: t.image_id,
-                    });
-                };
-                let Some(keypoint) = image.keypoints.get(t.keypoint_index as usize) else {
-                    return Err(ModelError::TrackMissingKeypoint {
-                        point3d_id: point.id,
-                        element,
-                        image_id: t.image_id,
-                        keypoint_index: t.keypoint_index,
-                        num_keypoints: image.keypoints.len(),
-                    });
-                };
-                if keypoint.point3d_id != Some(point.id) {
-                    return Err(ModelError::TrackKeypointMismatch {
-                        point3d_id: point.id,
-                        element,
-                        image_id: t.image_id,
-                        keypoint_index: t.keypoint_index,
-                        actual: match keypoint.point3d_id {
-                            Some(other) => format!("3D point {other}"),
-                            None => "no 3D point".to_owned(),
-                        },
-                    });
-                }
+            };
+            let Some(keypoint) = image.keypoints.get(t.keypoint_index as usize) else {
+                return Err(ModelError::TrackMissingKeypoint {
+                    point3d_id: point.id,
+                    element,
+                    image_id: t.image_id,
+                    keypoint_index: t.keypoint_index,
+                    num_keypoints: image.keypoints.len(),
+                });
+            };
+            if keypoint.point3d_id != Some(point.id) {
+                return Err(ModelError::TrackKeypointMismatch {
+                    point3d_id: point.id,
+                    element,
+                    image_id: t.image_id,
+                    keypoint_index: t.keypoint_index,
+                    actual: match keypoint.point3d_id {
+                        Some(other) => format!("3D point {other}"),
+                        None => "no 3D point".to_owned(),
+                    },
+                });
             }
         }
         Ok(())
@@ -529,7 +552,10 @@ mod tests {
         assert!(model.camera(8).is_none());
         let errors = model.reprojection_errors(model.point(11).unwrap());
         assert_eq!(errors, vec![Some(0.0)]);
-        assert_eq!(model.image(3).unwrap().center_world(), Point3::new(0., 0., -5.));
+        assert_eq!(
+            model.image(3).unwrap().center_world(),
+            Point3::new(0., 0., -5.)
+        );
     }
 
     #[test]
@@ -542,12 +568,18 @@ mod tests {
         let (c, i, mut p) = tiny();
         p[0].track[0].keypoint_index = 5;
         let err = Reconstruction::from_parts(c, i, p).unwrap_err();
-        assert!(matches!(err, ModelError::TrackMissingKeypoint { .. }), "{err}");
+        assert!(
+            matches!(err, ModelError::TrackMissingKeypoint { .. }),
+            "{err}"
+        );
 
         let (c, i, mut p) = tiny();
         p[0].track[0].keypoint_index = 1;
         let err = Reconstruction::from_parts(c, i, p).unwrap_err();
-        assert!(matches!(err, ModelError::TrackKeypointMismatch { .. }), "{err}");
+        assert!(
+            matches!(err, ModelError::TrackKeypointMismatch { .. }),
+            "{err}"
+        );
 
         let (c, i, mut p) = tiny();
         p.push(p[0].clone());
@@ -590,7 +622,10 @@ mod tests {
 
         let frames_without_image: Vec<Frame> = Vec::new();
         let err = compose_rig_poses(&mut images, &rigs, &frames_without_image).unwrap_err();
-        assert!(matches!(err, ModelError::ImageWithoutFrame { image_id: 3, .. }));
+        assert!(matches!(
+            err,
+            ModelError::ImageWithoutFrame { image_id: 3, .. }
+        ));
     }
 
     #[test]

@@ -207,7 +207,12 @@ pub fn parse_ply(bytes: &[u8], path: &Path) -> SceneResult<Ply> {
         .windows(END.len())
         .position(|w| w == END)
         .ok_or_else(|| {
-            parse_error(path, Location::Byte(0), "header", "no end_header".to_owned())
+            parse_error(
+                path,
+                Location::Byte(0),
+                "header",
+                "no end_header".to_owned(),
+            )
         })?;
     let mut body_start = header_end + END.len();
     if bytes.get(body_start) == Some(&b'\r') {
@@ -217,7 +222,12 @@ pub fn parse_ply(bytes: &[u8], path: &Path) -> SceneResult<Ply> {
         body_start += 1;
     }
     let header = std::str::from_utf8(&bytes[..header_end]).map_err(|_| {
-        parse_error(path, Location::Byte(0), "header", "header is not text".to_owned())
+        parse_error(
+            path,
+            Location::Byte(0),
+            "header",
+            "header is not text".to_owned(),
+        )
     })?;
     let mut lines = header.lines().enumerate();
     match lines.next() {
@@ -247,9 +257,12 @@ pub fn parse_ply(bytes: &[u8], path: &Path) -> SceneResult<Ply> {
                     other => return Err(err(format!("unknown format '{other}'"))),
                 })
             }
-            ["comment", ..] => ply
-                .comments
-                .push(line.trim_start().trim_start_matches("comment").trim().to_owned()),
+            ["comment", ..] => ply.comments.push(
+                line.trim_start()
+                    .trim_start_matches("comment")
+                    .trim()
+                    .to_owned(),
+            ),
             ["obj_info", ..] => {}
             ["element", name, count] => {
                 let count: usize = count
@@ -296,7 +309,12 @@ pub fn parse_ply(bytes: &[u8], path: &Path) -> SceneResult<Ply> {
         }
     }
     let encoding = encoding.ok_or_else(|| {
-        parse_error(path, Location::Byte(0), "header", "missing format line".to_owned())
+        parse_error(
+            path,
+            Location::Byte(0),
+            "header",
+            "missing format line".to_owned(),
+        )
     })?;
     let body = &bytes[body_start..];
     match encoding {
@@ -358,7 +376,9 @@ fn parse_binary_body(
                 };
                 match column.kind {
                     PropertyKind::Scalar(t) => {
-                        let bytes = body.get(pos..pos + t.size()).ok_or_else(|| truncated(pos))?;
+                        let bytes = body
+                            .get(pos..pos + t.size())
+                            .ok_or_else(|| truncated(pos))?;
                         column.values.push(t.decode(bytes, little_endian));
                         pos += t.size();
                     }
@@ -388,9 +408,17 @@ fn parse_binary_body(
 
 fn parse_ascii_body(body: &[u8], path: &Path, ply: &mut Ply) -> SceneResult<()> {
     let text = std::str::from_utf8(body).map_err(|_| {
-        parse_error(path, Location::Byte(0), "body", "ASCII body is not text".to_owned())
+        parse_error(
+            path,
+            Location::Byte(0),
+            "body",
+            "ASCII body is not text".to_owned(),
+        )
     })?;
-    let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty());
     for element in &mut ply.elements {
         for row in 0..element.count {
             let Some((index, line)) = lines.next() else {
@@ -425,7 +453,7 @@ fn parse_ascii_body(body: &[u8], path: &Path, ply: &mut Ply) -> SceneResult<()> 
                     }
                     PropertyKind::List { .. } => {
                         let n = next(&column.name)?;
-                        if n < 0.0 || n > 1e6 {
+                        if !(0.0..=1e6).contains(&n) {
                             return Err(err(format!("list length {n} is not plausible")));
                         }
                         for _ in 0..n as usize {
@@ -535,7 +563,9 @@ mod tests {
         assert_eq!(v.column("v").unwrap().list_row(0), &[3.0, 4.0]);
         assert!(v.column("v").unwrap().list_row(1).is_empty());
 
-        let mut be = b"ply\nformat binary_big_endian 1.0\nelement vertex 1\nproperty int x\nend_header\n".to_vec();
+        let mut be =
+            b"ply\nformat binary_big_endian 1.0\nelement vertex 1\nproperty int x\nend_header\n"
+                .to_vec();
         be.extend_from_slice(&(-5i32).to_be_bytes());
         let ply = parse_ply(&be, Path::new("b.ply")).unwrap();
         assert_eq!(ply.elements[0].columns[0].values, vec![-5.0]);
@@ -549,7 +579,9 @@ mod tests {
             assert!(err.to_string().starts_with("t.ply: byte"), "{err}");
         }
         let lying = b"ply\nformat binary_little_endian 1.0\nelement vertex 999999999999\nproperty float x\nend_header\n";
-        let err = parse_ply(lying, Path::new("l.ply")).unwrap_err().to_string();
+        let err = parse_ply(lying, Path::new("l.ply"))
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("cannot fit"), "{err}");
         assert!(parse_ply(b"plx\n", Path::new("x.ply")).is_err());
     }

@@ -209,9 +209,12 @@ fn reprojection_summary(model: &super::Reconstruction) -> ReprojectionSummary {
         .iter()
         .filter(|t| t.0 >= 0.0)
         .filter_map(|t| t.1.map(|m| (m - t.0).abs()))
-        .fold(None, |acc: Option<f64>, d| Some(acc.map_or(d, |a| a.max(d))));
+        .fold(None, |acc: Option<f64>, d| {
+            Some(acc.map_or(d, |a| a.max(d)))
+        });
     ReprojectionSummary {
-        stored_mean_px: (!stored.is_empty()).then(|| stored.iter().sum::<f64>() / stored.len() as f64),
+        stored_mean_px: (!stored.is_empty())
+            .then(|| stored.iter().sum::<f64>() / stored.len() as f64),
         recomputed_mean_px: (!recomputed.is_empty())
             .then(|| recomputed.iter().sum::<f64>() / recomputed.len() as f64),
         recomputed_rms_px: (count > 0).then(|| (squares / count as f64).sqrt()),

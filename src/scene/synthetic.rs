@@ -8,9 +8,7 @@
 use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector3};
 
 use super::camera::{Camera, CameraId, CameraModelKind};
-use super::model::{
-    Frame, Image, Keypoint, Point3D, Reconstruction, Rig, SensorId, TrackElement,
-};
+use super::model::{Frame, Image, Keypoint, Point3D, Reconstruction, Rig, SensorId, TrackElement};
 use crate::util::rng::Rng;
 
 /// What to generate.
@@ -96,11 +94,8 @@ pub fn look_at(center_world: Point3<f64>, target_world: Point3<f64>) -> Isometry
     let right = forward.cross(&world_up).normalize();
     let down = forward.cross(&right);
     // Rows of the rotation are the camera axes (x right, y down, z forward) in world frame.
-    let rotation_matrix = nalgebra::Matrix3::from_rows(&[
-        right.transpose(),
-        down.transpose(),
-        forward.transpose(),
-    ]);
+    let rotation_matrix =
+        nalgebra::Matrix3::from_rows(&[right.transpose(), down.transpose(), forward.transpose()]);
     let rotation = UnitQuaternion::from_matrix(&rotation_matrix);
     let translation = -(rotation * center_world.coords);
     Isometry3::from_parts(Translation3::from(translation), rotation)
@@ -418,8 +413,7 @@ mod tests {
         for image in &mut images {
             image.camera_from_world = Isometry3::identity();
         }
-        crate::scene::model::compose_rig_poses(&mut images, model.rigs(), model.frames())
-            .unwrap();
+        crate::scene::model::compose_rig_poses(&mut images, model.rigs(), model.frames()).unwrap();
         for (composed, original) in images.iter().zip(model.images()) {
             let difference = composed.camera_from_world.inverse() * original.camera_from_world;
             assert!(difference.translation.vector.norm() < 1e-12);

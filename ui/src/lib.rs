@@ -203,7 +203,9 @@ fn cameras_ui(ui: &mut egui::Ui, loaded: &LoadedScene) {
                 egui::Grid::new(("camera_params", camera.id))
                     .striped(true)
                     .show(ui, |ui| {
-                        for (name, value) in camera.model.param_names().split(", ").zip(camera.params()) {
+                        for (name, value) in
+                            camera.model.param_names().split(", ").zip(camera.params())
+                        {
                             ui.label(name);
                             ui.monospace(format!("{value:.6}"));
                             ui.end_row();

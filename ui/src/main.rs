@@ -6,7 +6,11 @@ use anyhow::Result;
 use clap::Parser;
 
 #[derive(Parser)]
-#[command(name = "frond-ui", version, about = "Frond's interactive plant modeling GUI")]
+#[command(
+    name = "frond-ui",
+    version,
+    about = "Frond's interactive plant modeling GUI"
+)]
 struct Args {
     /// COLMAP project folder, dense/0 workspace or model folder to open.
     path: Option<PathBuf>,

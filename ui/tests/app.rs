@@ -17,7 +17,10 @@ fn fixture(name: &str) -> PathBuf {
 fn harness(path: PathBuf) -> Harness<'static, FrondApp> {
     let mut harness = Harness::builder()
         .with_size(egui::vec2(1200.0, 800.0))
-        .build_ui_state(|ui, app: &mut FrondApp| app.window_ui(ui), FrondApp::new(Some(path)));
+        .build_ui_state(
+            |ui, app: &mut FrondApp| app.window_ui(ui),
+            FrondApp::new(Some(path)),
+        );
     for _ in 0..500 {
         harness.step();
         if !harness.state().is_loading() {
