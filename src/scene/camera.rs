@@ -623,10 +623,13 @@ mod tests {
         #![proptest_config(ProptestConfig::with_cases(400))]
 
         /// Unproject then project returns the pixel, anywhere in the image, for every model.
+        /// Focal lengths keep the image corners within ~45° of the axis, where these
+        /// distortion polynomials are monotone (a polynomial fitted to a lens folds back outside
+        /// its calibrated field, and there no ray maps to the pixel).
         #[test]
         fn unproject_then_project_returns_pixel(
             model in model_strategy(),
-            focal in 350.0f64..900.0,
+            focal in 500.0f64..900.0,
             signs in proptest::collection::vec(-1.0f64..1.0, 12),
             fx in 0.0f64..=1.0,
             fy in 0.0f64..=1.0,
