@@ -8,7 +8,11 @@ use frond::scene::synthetic::{SyntheticModelSpec, generate};
 use frond::scene::{CameraModelKind, io_binary, io_text};
 
 fn main() -> Result<()> {
-    let root = PathBuf::from(std::env::args().nth(1).unwrap_or_else(|| "fuzz/corpus".into()));
+    let root = PathBuf::from(
+        std::env::args()
+            .nth(1)
+            .unwrap_or_else(|| "fuzz/corpus".into()),
+    );
     let binary_dir = root.join("colmap_binary");
     let text_dir = root.join("colmap_text");
     std::fs::create_dir_all(&binary_dir)?;
