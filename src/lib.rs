@@ -4,7 +4,16 @@
 //! as textured meshes, branches as generalized cylinders) comes out. Stages, in data-flow order:
 //!
 //! - [`scene`]: COLMAP models (text and binary, every camera model), images, dense points.
-//! - [`util`]: atomic file output and deterministic random numbers shared by all stages.
+//! - [`mesh`], [`branch`]: triangle meshes and generalized cylinders shared by every stage.
+//! - [`render`]: the headless wgpu render core.
+//! - [`synth`]: synthetic plants with ground truth; [`eval`]: scoring reconstructions.
+//! - [`util`]: atomic file output, deterministic random numbers, progress reporting.
 
+pub mod branch;
+pub mod eval;
+pub mod mesh;
+pub mod model;
+pub mod render;
 pub mod scene;
+pub mod synth;
 pub mod util;

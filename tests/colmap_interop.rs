@@ -2,50 +2,14 @@
 //! `colmap model_converter` read with the same counts, and what COLMAP writes back, Frond reads
 //! as the same model. Runs when `colmap` is on PATH; on CI (CI=true) a missing COLMAP fails.
 
-use std::collections::HashMap;
+mod common;
+
 use std::path::Path;
-use std::process::Command;
+
+use common::{analyze, colmap_available, run_colmap};
 
 use frond::scene::synthetic::{SyntheticModelSpec, generate};
 use frond::scene::{CameraModelKind, ModelFormat, Reconstruction, read_model, write_model};
-
-fn colmap_available() -> bool {
-    let found = Command::new("colmap").arg("help").output().is_ok();
-    if !found && std::env::var("CI").is_ok_and(|v| v == "true") {
-        panic!("colmap is not on PATH on CI: scripts/setup.sh should have installed it");
-    }
-    if !found {
-        eprintln!("skipping: colmap is not on PATH (run scripts/setup.sh)");
-    }
-    found
-}
-
-fn run_colmap(args: &[&str]) -> String {
-    let output = Command::new("colmap")
-        .args(args)
-        .output()
-        .expect("colmap runs");
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&output.stdout),
-        String::from_utf8_lossy(&output.stderr)
-    );
-    assert!(output.status.success(), "colmap {args:?} failed:\n{text}");
-    text
-}
-
-/// Parses the "Name: value" lines `colmap model_analyzer` prints.
-fn analyze(dir: &Path) -> HashMap<String, f64> {
-    let text = run_colmap(&["model_analyzer", "--path", dir.to_str().unwrap()]);
-    text.lines()
-        .filter_map(|line| {
-            let (key, value) = line.rsplit_once(": ")?;
-            let key = key.rsplit("] ").next().unwrap_or(key).trim().to_owned();
-            let value = value.trim().trim_end_matches("px").parse().ok()?;
-            Some((key, value))
-        })
-        .collect()
-}
 
 fn check_analyzer_counts(dir: &Path, model: &Reconstruction) {
     let stats = analyze(dir);

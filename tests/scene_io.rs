@@ -1,6 +1,10 @@
 //! Scene I/O: round trips through both formats, real COLMAP data, folder layouts, bad input.
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use std::path::Path;
+
+use common::shared_data;
 
 use frond::scene::synthetic::{SyntheticModelSpec, generate};
 use frond::scene::{
@@ -8,12 +12,6 @@ use frond::scene::{
     read_model, write_model,
 };
 use proptest::prelude::*;
-
-fn shared_data(relative: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data")
-        .join(relative)
-}
 
 fn model_kind() -> impl Strategy<Value = CameraModelKind> {
     (0usize..CameraModelKind::ALL.len()).prop_map(|i| CameraModelKind::ALL[i])

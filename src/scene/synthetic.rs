@@ -96,7 +96,11 @@ pub fn look_at(center_world: Point3<f64>, target_world: Point3<f64>) -> Isometry
     // Rows of the rotation are the camera axes (x right, y down, z forward) in world frame.
     let rotation_matrix =
         nalgebra::Matrix3::from_rows(&[right.transpose(), down.transpose(), forward.transpose()]);
-    let rotation = UnitQuaternion::from_matrix(&rotation_matrix);
+    // The rows are orthonormal by construction; `from_matrix` (an iterative fit) can fail
+    // near half-turn rotations, the exact conversion cannot.
+    let rotation = UnitQuaternion::from_rotation_matrix(
+        &nalgebra::Rotation3::from_matrix_unchecked(rotation_matrix),
+    );
     let translation = -(rotation * center_world.coords);
     Isometry3::from_parts(Translation3::from(translation), rotation)
 }
@@ -397,6 +401,17 @@ mod tests {
         // World up (+z) maps to image up (−y in camera frame).
         let up_camera = pose.rotation * Vector3::z();
         assert!(up_camera.y < 0.0);
+        // Every direction on a ring, including half turns, looks at the target.
+        for k in 0..360 {
+            let a = (k as f64).to_radians();
+            let center = Point3::new(2.0 * a.cos(), 2.0 * a.sin(), 0.7);
+            let target = Point3::new(0.1, -0.2, 0.3);
+            let p = look_at(center, target) * target;
+            assert!(
+                p.x.abs() < 1e-9 && p.y.abs() < 1e-9 && p.z > 0.0,
+                "{k}°: {p:?}"
+            );
+        }
     }
 
     #[test]

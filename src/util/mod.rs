@@ -2,4 +2,5 @@
 
 pub mod atomic;
 pub mod id_hash;
+pub mod progress;
 pub mod rng;

@@ -1,0 +1,595 @@
+//! `frond eval`: scores a reconstruction against synthetic ground truth.
+//!
+//! The prediction is the reconstruction output contract: `OUT/segmentation.ply` (the input
+//! points with `leaf_id`, −1 = not a leaf; optionally `point_id`), `OUT/plant.glb` (nodes
+//! `leaf_NNN` for segment NNN and `branch_NNN`, world frame) and optionally
+//! `OUT/skeleton.json` (branches with a `centerline`, the schema of `gt/branches.json`).
+//!
+//! Points are paired with the truth by `point_id`, else by identical order and position; when
+//! the prediction was made by real COLMAP (another gauge), it is first aligned by a similarity
+//! from matched camera centres (Umeyama) and each point takes the label of the nearest ground-
+//! truth surface sample.
+
+pub mod align;
+pub mod geometry;
+pub mod metrics;
+
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use nalgebra::Point3;
+use serde::{Deserialize, Serialize};
+
+pub use align::{Similarity, umeyama};
+pub use metrics::{LeafScores, MatchingOptions, adjusted_rand_index, score_leaves};
+
+use crate::mesh::TriMesh;
+use crate::scene::ply::{self, Ply};
+use crate::scene::{SceneError, read_model};
+use crate::synth::Part;
+
+/// Evaluation failures; each names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum EvalError {
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error("{path}: {message}")]
+    Input { path: PathBuf, message: String },
+}
+
+fn input_error(path: &Path, message: impl Into<String>) -> EvalError {
+    EvalError::Input {
+        path: path.to_path_buf(),
+        message: message.into(),
+    }
+}
+
+/// A labelled point set.
+#[derive(Clone, Debug, Default)]
+pub struct LabelledPoints {
+    pub positions: Vec<Point3<f64>>,
+    pub point_ids: Option<Vec<u64>>,
+    pub leaf_ids: Vec<i64>,
+    /// Part per point (ground truth only).
+    pub parts: Option<Vec<Part>>,
+}
+
+fn column<'a>(ply: &'a Ply, name: &str, path: &Path) -> Result<&'a [f64], EvalError> {
+    ply.element("vertex")
+        .and_then(|v| v.column(name))
+        .map(|c| c.values.as_slice())
+        .ok_or_else(|| input_error(path, format!("vertex element has no '{name}' property")))
+}
+
+/// Reads a labelled point PLY (`x y z leaf_id` [+ `point_id`, `part`]).
+pub fn read_labelled_points(path: &Path) -> Result<LabelledPoints, EvalError> {
+    let ply = ply::read_ply(path)?;
+    let (x, y, z) = (
+        column(&ply, "x", path)?,
+        column(&ply, "y", path)?,
+        column(&ply, "z", path)?,
+    );
+    let leaf = column(&ply, "leaf_id", path)?;
+    let positions = (0..x.len())
+        .map(|i| Point3::new(x[i], y[i], z[i]))
+        .collect();
+    let point_ids = column(&ply, "point_id", path)
+        .ok()
+        .map(|ids| ids.iter().map(|&v| v as u64).collect());
+    let parts = match column(&ply, "part", path) {
+        Ok(codes) => Some(
+            codes
+                .iter()
+                .enumerate()
+                .map(|(i, &c)| {
+                    Part::from_code(c as u8)
+                        .ok_or_else(|| input_error(path, format!("vertex {i}: unknown part {c}")))
+                })
+                .collect::<Result<Vec<_>, _>>()?,
+        ),
+        Err(_) => None,
+    };
+    Ok(LabelledPoints {
+        positions,
+        point_ids,
+        leaf_ids: leaf.iter().map(|&v| v as i64).collect(),
+        parts,
+    })
+}
+
+/// One GT leaf.
+#[derive(Clone, Debug, Deserialize)]
+pub struct GtLeafRecord {
+    pub id: u32,
+    pub length: f64,
+    pub area: f64,
+    pub mesh: String,
+}
+
+/// One branch skeleton (GT `branches.json` or predicted `skeleton.json`).
+#[derive(Clone, Debug, Deserialize, Serialize)]
+pub struct SkeletonBranch {
+    pub id: u32,
+    #[serde(default)]
+    pub parent: Option<u32>,
+    pub radius_start: f64,
+    pub radius_end: f64,
+    pub centerline: Vec<[f64; 3]>,
+}
+
+impl SkeletonBranch {
+    pub fn length(&self) -> f64 {
+        self.centerline
+            .windows(2)
+            .map(|w| (Point3::from(w[1]) - Point3::from(w[0])).norm())
+            .sum()
+    }
+    pub fn mean_radius(&self) -> f64 {
+        0.5 * (self.radius_start + self.radius_end)
+    }
+}
+
+/// Everything under a synthetic dataset's `gt/`.
+pub struct GroundTruth {
+    pub root: PathBuf,
+    pub points: LabelledPoints,
+    pub leaves: Vec<(GtLeafRecord, TriMesh)>,
+    pub branches: Vec<SkeletonBranch>,
+    pub surface_samples: LabelledPoints,
+    pub plant_height: f64,
+}
+
+fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, EvalError> {
+    let text = std::fs::read_to_string(path).map_err(|e| input_error(path, e.to_string()))?;
+    serde_json::from_str(&text).map_err(|e| input_error(path, e.to_string()))
+}
+
+impl GroundTruth {
+    pub fn load(root: &Path) -> Result<Self, EvalError> {
+        let gt = root.join("gt");
+        let points = read_labelled_points(&gt.join("points.ply"))?;
+        let records: Vec<GtLeafRecord> = read_json(&gt.join("leaves.json"))?;
+        let mut leaves = Vec::with_capacity(records.len());
+        for record in records {
+            let mesh = TriMesh::read_ply(&gt.join(&record.mesh))?;
+            leaves.push((record, mesh));
+        }
+        let branches: Vec<SkeletonBranch> = read_json(&gt.join("branches.json"))?;
+        let surface_samples = read_labelled_points(&gt.join("surface_samples.ply"))?;
+        let meta: serde_json::Value = read_json(&root.join("meta.json"))?;
+        let plant_height = meta["plant"]["height"]
+            .as_f64()
+            .ok_or_else(|| input_error(&root.join("meta.json"), "no plant.height"))?;
+        Ok(Self {
+            root: root.to_path_buf(),
+            points,
+            leaves,
+            branches,
+            surface_samples,
+            plant_height,
+        })
+    }
+}
+
+/// A reconstruction's output folder.
+pub struct Prediction {
+    pub points: LabelledPoints,
+    /// Leaf meshes by segment id (`leaf_NNN` nodes).
+    pub leaf_meshes: BTreeMap<i64, TriMesh>,
+    pub branch_meshes: usize,
+    pub skeleton: Option<Vec<SkeletonBranch>>,
+}
+
+impl Prediction {
+    pub fn load(out: &Path) -> Result<Self, EvalError> {
+        let points = read_labelled_points(&out.join("segmentation.ply"))?;
+        let glb_path = out.join("plant.glb");
+        let mut leaf_meshes = BTreeMap::new();
+        let mut branch_meshes = 0;
+        if glb_path.is_file() {
+            let bytes =
+                std::fs::read(&glb_path).map_err(|e| input_error(&glb_path, e.to_string()))?;
+            let nodes = crate::model::gltf::read_glb_meshes(&bytes, &glb_path)
+                .map_err(|e| input_error(&glb_path, e.to_string()))?;
+            for node in nodes {
+                if let Some(id) = node.name.strip_prefix("leaf_").and_then(|s| s.parse().ok()) {
+                    leaf_meshes.insert(id, node.mesh);
+                } else if node.name.starts_with("branch_") {
+                    branch_meshes += 1;
+                }
+            }
+        }
+        let skeleton_path = out.join("skeleton.json");
+        let skeleton = if skeleton_path.is_file() {
+            Some(read_json(&skeleton_path)?)
+        } else {
+            None
+        };
+        Ok(Self {
+            points,
+            leaf_meshes,
+            branch_meshes,
+            skeleton,
+        })
+    }
+
+    /// Applies a similarity to every predicted position and mesh.
+    pub fn transform(&mut self, similarity: &Similarity) {
+        for p in &mut self.points.positions {
+            *p = similarity.apply(p);
+        }
+        for mesh in self.leaf_meshes.values_mut() {
+            for p in &mut mesh.positions {
+                *p = similarity.apply(&p.cast::<f64>()).cast::<f32>();
+            }
+            mesh.compute_normals();
+        }
+        if let Some(skeleton) = &mut self.skeleton {
+            for branch in skeleton {
+                for c in &mut branch.centerline {
+                    let p = similarity.apply(&Point3::from(*c));
+                    *c = [p.x, p.y, p.z];
+                }
+                branch.radius_start *= similarity.scale;
+                branch.radius_end *= similarity.scale;
+            }
+        }
+    }
+}
+
+/// Evaluation settings.
+#[derive(Clone, Debug, Serialize)]
+pub struct EvalOptions {
+    pub matching: MatchingOptions,
+    /// Surface samples per leaf for Chamfer distances.
+    pub surface_samples: usize,
+    /// When predicted points are not ours: a point takes the label of the nearest GT surface
+    /// sample within this fraction of the plant height, else counts as not plant.
+    pub transfer_radius: f64,
+}
+
+impl Default for EvalOptions {
+    fn default() -> Self {
+        Self {
+            matching: MatchingOptions::default(),
+            surface_samples: 2000,
+            transfer_radius: 0.01,
+        }
+    }
+}
+
+/// Per matched leaf geometry errors.
+#[derive(Clone, Debug, Serialize)]
+pub struct LeafGeometryError {
+    pub gt_leaf: i64,
+    pub segment: i64,
+    /// Symmetric Chamfer distance between the surfaces divided by the GT leaf length.
+    pub chamfer_relative: f64,
+    pub area_relative_error: f64,
+    /// Angle between mean normals, ignoring orientation, degrees.
+    pub normal_angle_deg: f64,
+}
+
+/// Median and mean of a list (None when empty).
+#[derive(Clone, Debug, Serialize)]
+pub struct Summary {
+    pub count: usize,
+    pub median: Option<f64>,
+    pub mean: Option<f64>,
+}
+
+impl Summary {
+    pub fn of(values: &[f64]) -> Self {
+        let mut sorted: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
+        sorted.sort_by(f64::total_cmp);
+        let n = sorted.len();
+        Self {
+            count: n,
+            median: (n > 0).then(|| {
+                if n % 2 == 1 {
+                    sorted[n / 2]
+                } else {
+                    0.5 * (sorted[n / 2 - 1] + sorted[n / 2])
+                }
+            }),
+            mean: (n > 0).then(|| sorted.iter().sum::<f64>() / n as f64),
+        }
+    }
+}
+
+/// Branch skeleton scores.
+#[derive(Clone, Debug, Serialize)]
+pub struct SkeletonScores {
+    /// Mean distance from the GT main stem's centreline to the predicted skeleton, in units of
+    /// the stem's mean radius.
+    pub stem_distance_in_radii: Option<f64>,
+    /// GT branches longer than 10 mean radii.
+    pub eligible_branches: usize,
+    /// Of those, branches with ≥ 80 % of their centreline within 2 radii (≥ 3 mm) of the
+    /// predicted skeleton.
+    pub matched_branches: usize,
+    pub branch_recall: f64,
+}
+
+/// The evaluation report.
+#[derive(Clone, Debug, Serialize)]
+pub struct EvalReport {
+    pub points_scored: usize,
+    /// How predicted points were paired with the truth.
+    pub pairing: String,
+    pub alignment: Option<AlignmentReport>,
+    /// ARI over points whose GT part is leaf or stem (non-leaf labels form one cluster).
+    pub ari_plant: f64,
+    /// ARI over all points.
+    pub ari_all: f64,
+    pub leaves: LeafScores,
+    pub leaf_geometry: Vec<LeafGeometryError>,
+    pub chamfer_relative: Summary,
+    pub area_relative_error: Summary,
+    pub normal_angle_deg: Summary,
+    pub skeleton: Option<SkeletonScores>,
+    pub options: EvalOptions,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct AlignmentReport {
+    pub cameras_matched: usize,
+    pub scale: f64,
+    /// RMS camera-centre residual after alignment, in GT units (metres).
+    pub rms_camera_residual: f64,
+}
+
+/// Aligns a prediction made from another COLMAP model (`pred_model`) to the GT cameras.
+pub fn align_to_ground_truth(
+    gt_root: &Path,
+    pred_model: &Path,
+) -> Result<(Similarity, AlignmentReport), EvalError> {
+    let (gt_model, _) = read_model(&gt_root.join("sparse/0"))?;
+    let (pred, _) = read_model(pred_model)?;
+    let gt_centers: HashMap<&str, Point3<f64>> = gt_model
+        .images()
+        .iter()
+        .map(|i| (i.name.as_str(), i.center_world()))
+        .collect();
+    let mut source = Vec::new();
+    let mut target = Vec::new();
+    for image in pred.images() {
+        if let Some(c) = gt_centers.get(image.name.as_str()) {
+            source.push(image.center_world());
+            target.push(*c);
+        }
+    }
+    let similarity = umeyama(&source, &target).map_err(|e| {
+        input_error(
+            pred_model,
+            format!("cannot align cameras to the truth: {e}"),
+        )
+    })?;
+    let rms = (source
+        .iter()
+        .zip(&target)
+        .map(|(s, t)| (similarity.apply(s) - t).norm_squared())
+        .sum::<f64>()
+        / source.len() as f64)
+        .sqrt();
+    Ok((
+        similarity,
+        AlignmentReport {
+            cameras_matched: source.len(),
+            scale: similarity.scale,
+            rms_camera_residual: rms,
+        },
+    ))
+}
+
+/// GT leaf id and part for each predicted point, and how they were paired.
+fn pair_points(
+    gt: &GroundTruth,
+    pred: &Prediction,
+    options: &EvalOptions,
+) -> Result<(Vec<i64>, Vec<Part>, String), EvalError> {
+    let gt_parts = gt
+        .points
+        .parts
+        .as_ref()
+        .ok_or_else(|| input_error(&gt.root, "gt/points.ply has no part column"))?;
+    if let (Some(pred_ids), Some(gt_ids)) = (&pred.points.point_ids, &gt.points.point_ids) {
+        let index: HashMap<u64, usize> =
+            gt_ids.iter().enumerate().map(|(i, &id)| (id, i)).collect();
+        if pred_ids.iter().all(|id| index.contains_key(id)) {
+            let (leaves, parts) = pred_ids
+                .iter()
+                .map(|id| {
+                    let i = index[id];
+                    (gt.points.leaf_ids[i], gt_parts[i])
+                })
+                .unzip();
+            return Ok((leaves, parts, "point_id".into()));
+        }
+    }
+    let same_order = pred.points.positions.len() == gt.points.positions.len()
+        && pred
+            .points
+            .positions
+            .iter()
+            .zip(&gt.points.positions)
+            .all(|(a, b)| (a - b).norm() < 1e-5);
+    if same_order {
+        return Ok((gt.points.leaf_ids.clone(), gt_parts.clone(), "order".into()));
+    }
+    // Different point sets: nearest GT surface sample within the transfer radius.
+    let samples = &gt.surface_samples;
+    let sample_parts = samples
+        .parts
+        .as_ref()
+        .ok_or_else(|| input_error(&gt.root, "surface_samples.ply has no part column"))?;
+    if samples.positions.is_empty() {
+        return Err(input_error(
+            &gt.root,
+            "no surface samples to transfer labels from",
+        ));
+    }
+    let coordinates: Vec<[f64; 3]> = samples.positions.iter().map(|p| [p.x, p.y, p.z]).collect();
+    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&coordinates)
+        .map_err(|e| input_error(&gt.root, format!("cannot index surface samples: {e:?}")))?;
+    let radius = options.transfer_radius * gt.plant_height;
+    let (leaves, parts) = pred
+        .points
+        .positions
+        .iter()
+        .map(|p| {
+            let nearest = tree
+                .query(&[p.x, p.y, p.z])
+                .nearest_one::<SquaredEuclidean<f64>>()
+                .execute();
+            if nearest.distance.sqrt() <= radius {
+                let i = nearest.item as usize;
+                (samples.leaf_ids[i], sample_parts[i])
+            } else {
+                (-1, Part::Background)
+            }
+        })
+        .unzip();
+    Ok((leaves, parts, "nearest surface sample".into()))
+}
+
+/// Scores a prediction (already in the GT frame) against the truth.
+pub fn evaluate(
+    gt: &GroundTruth,
+    pred: &Prediction,
+    alignment: Option<AlignmentReport>,
+    options: &EvalOptions,
+) -> Result<EvalReport, EvalError> {
+    let (gt_leaf, gt_part, pairing) = pair_points(gt, pred, options)?;
+    let predicted = &pred.points.leaf_ids;
+    let n = predicted.len();
+    let collapse = |l: i64| if l < 0 { -1 } else { l };
+    let plant: Vec<usize> = (0..n).filter(|&i| gt_part[i].is_plant()).collect();
+    let ari_plant = adjusted_rand_index(
+        &plant
+            .iter()
+            .map(|&i| collapse(gt_leaf[i]))
+            .collect::<Vec<_>>(),
+        &plant
+            .iter()
+            .map(|&i| collapse(predicted[i]))
+            .collect::<Vec<_>>(),
+    );
+    let ari_all = adjusted_rand_index(
+        &gt_leaf.iter().map(|&l| collapse(l)).collect::<Vec<_>>(),
+        &predicted.iter().map(|&l| collapse(l)).collect::<Vec<_>>(),
+    );
+    let leaves = score_leaves(&gt_leaf, predicted, &options.matching);
+
+    let gt_leaf_by_id: HashMap<i64, &(GtLeafRecord, TriMesh)> =
+        gt.leaves.iter().map(|l| (l.0.id as i64, l)).collect();
+    let leaf_geometry: Vec<LeafGeometryError> = leaves
+        .matches
+        .iter()
+        .filter_map(|m| {
+            let (record, gt_mesh) = gt_leaf_by_id.get(&m.gt_leaf)?;
+            let pred_mesh = pred.leaf_meshes.get(&m.segment)?;
+            let seed = (m.gt_leaf as u64) << 32 | m.segment as u64;
+            let chamfer =
+                geometry::symmetric_chamfer(gt_mesh, pred_mesh, options.surface_samples, seed)?;
+            let pred_area = pred_mesh.area();
+            let angle = geometry::normal_angle_deg(gt_mesh, pred_mesh);
+            Some(LeafGeometryError {
+                gt_leaf: m.gt_leaf,
+                segment: m.segment,
+                chamfer_relative: chamfer / record.length,
+                area_relative_error: (pred_area - record.area).abs() / record.area,
+                normal_angle_deg: angle,
+            })
+        })
+        .collect();
+    let pick = |f: fn(&LeafGeometryError) -> f64| {
+        Summary::of(&leaf_geometry.iter().map(f).collect::<Vec<_>>())
+    };
+    let skeleton = pred
+        .skeleton
+        .as_ref()
+        .map(|skeleton| geometry::score_skeleton(&gt.branches, skeleton));
+    Ok(EvalReport {
+        points_scored: n,
+        pairing,
+        alignment,
+        ari_plant,
+        ari_all,
+        chamfer_relative: pick(|e| e.chamfer_relative),
+        area_relative_error: pick(|e| e.area_relative_error),
+        normal_angle_deg: pick(|e| e.normal_angle_deg),
+        leaves,
+        leaf_geometry,
+        skeleton,
+        options: options.clone(),
+    })
+}
+
+fn fmt_opt(v: Option<f64>, scale: f64, unit: &str) -> String {
+    v.map_or_else(|| "n/a".into(), |v| format!("{:.3}{unit}", v * scale))
+}
+
+impl EvalReport {
+    /// Human-readable summary.
+    pub fn to_text(&self) -> String {
+        use std::fmt::Write as _;
+        let mut s = String::new();
+        let l = &self.leaves;
+        let _ = writeln!(
+            s,
+            "points scored:     {} (paired by {})",
+            self.points_scored, self.pairing
+        );
+        if let Some(a) = &self.alignment {
+            let _ = writeln!(
+                s,
+                "alignment:         {} cameras, scale {:.4}, rms camera residual {:.4} m",
+                a.cameras_matched, a.scale, a.rms_camera_residual
+            );
+        }
+        let _ = writeln!(
+            s,
+            "ARI (plant / all): {:.4} / {:.4}",
+            self.ari_plant, self.ari_all
+        );
+        let _ = writeln!(
+            s,
+            "leaves:            recall {:.3} ({}/{}), precision {:.3} ({} segments)",
+            l.recall, l.matched, l.gt_leaves, l.precision, l.predicted_segments
+        );
+        let _ = writeln!(
+            s,
+            "segmentation:      {} over-segmented leaves ({:.1}%), {} under-segmented segments",
+            l.over_segmented,
+            if l.gt_leaves == 0 {
+                0.0
+            } else {
+                100.0 * l.over_segmented as f64 / l.gt_leaves as f64
+            },
+            l.under_segmented
+        );
+        let _ = writeln!(
+            s,
+            "leaf geometry:     {} leaves; Chamfer/length median {} mean {}; area error median {} mean {}; normal angle median {}",
+            self.chamfer_relative.count,
+            fmt_opt(self.chamfer_relative.median, 100.0, "%"),
+            fmt_opt(self.chamfer_relative.mean, 100.0, "%"),
+            fmt_opt(self.area_relative_error.median, 100.0, "%"),
+            fmt_opt(self.area_relative_error.mean, 100.0, "%"),
+            fmt_opt(self.normal_angle_deg.median, 1.0, "°"),
+        );
+        if let Some(k) = &self.skeleton {
+            let _ = writeln!(
+                s,
+                "skeleton:          stem distance {} radii; branch recall {:.3} ({}/{})",
+                fmt_opt(k.stem_distance_in_radii, 1.0, ""),
+                k.branch_recall,
+                k.matched_branches,
+                k.eligible_branches
+            );
+        }
+        s
+    }
+}

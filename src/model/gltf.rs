@@ -1,0 +1,369 @@
+//! glTF 2.0 binary (`.glb`) export and import of plant models.
+//!
+//! Export follows the evaluation contract: one node per part named `leaf_NNN` / `branch_NNN`,
+//! identity node transforms, vertex positions in the input model's world frame; textures are
+//! embedded as PNG; leaves are double-sided. Import (through the `gltf` crate, an independent
+//! implementation) returns each named node's mesh in world coordinates.
+
+use std::path::Path;
+
+use image::RgbaImage;
+use nalgebra::{Matrix4, Point3, Vector3};
+use serde_json::{Value, json};
+
+use crate::mesh::TriMesh;
+
+/// A mesh to export, with an optional base-colour texture.
+pub struct ExportNode<'a> {
+    pub name: String,
+    pub mesh: &'a TriMesh,
+    pub texture: Option<&'a RgbaImage>,
+    /// Base colour when there is no texture (linear RGBA).
+    pub color: [f32; 4],
+    pub double_sided: bool,
+}
+
+/// A mesh read back from a glb, by node name, in world coordinates.
+#[derive(Clone, Debug)]
+pub struct NamedMesh {
+    pub name: String,
+    pub mesh: TriMesh,
+}
+
+/// glb import failures.
+#[derive(Debug, thiserror::Error)]
+pub enum GltfError {
+    #[error("{path}: {message}")]
+    Invalid { path: String, message: String },
+}
+
+const GLB_MAGIC: u32 = 0x4654_6C67; // "glTF"
+const CHUNK_JSON: u32 = 0x4E4F_534A; // "JSON"
+const CHUNK_BIN: u32 = 0x004E_4942; // "BIN\0"
+const FLOAT: u32 = 5126;
+const UNSIGNED_INT: u32 = 5125;
+const ARRAY_BUFFER: u32 = 34962;
+const ELEMENT_ARRAY_BUFFER: u32 = 34963;
+
+struct BinaryBuffer {
+    bytes: Vec<u8>,
+    views: Vec<Value>,
+    accessors: Vec<Value>,
+}
+
+impl BinaryBuffer {
+    fn align(&mut self) {
+        while !self.bytes.len().is_multiple_of(4) {
+            self.bytes.push(0);
+        }
+    }
+
+    fn view(&mut self, data: &[u8], target: Option<u32>) -> usize {
+        self.align();
+        let offset = self.bytes.len();
+        self.bytes.extend_from_slice(data);
+        let mut view = json!({"buffer": 0, "byteOffset": offset, "byteLength": data.len()});
+        if let Some(target) = target {
+            view["target"] = json!(target);
+        }
+        self.views.push(view);
+        self.views.len() - 1
+    }
+
+    fn accessor_f32(&mut self, values: &[f32], components: usize, with_bounds: bool) -> usize {
+        let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+        let view = self.view(&bytes, Some(ARRAY_BUFFER));
+        let kind = match components {
+            2 => "VEC2",
+            3 => "VEC3",
+            _ => "SCALAR",
+        };
+        let count = values.len() / components;
+        let mut accessor = json!({
+            "bufferView": view, "componentType": FLOAT, "count": count, "type": kind
+        });
+        if with_bounds && count > 0 {
+            let mut lo = vec![f32::INFINITY; components];
+            let mut hi = vec![f32::NEG_INFINITY; components];
+            for chunk in values.chunks_exact(components) {
+                for c in 0..components {
+                    lo[c] = lo[c].min(chunk[c]);
+                    hi[c] = hi[c].max(chunk[c]);
+                }
+            }
+            accessor["min"] = json!(lo);
+            accessor["max"] = json!(hi);
+        }
+        self.accessors.push(accessor);
+        self.accessors.len() - 1
+    }
+
+    fn accessor_indices(&mut self, triangles: &[[u32; 3]]) -> usize {
+        let bytes: Vec<u8> = triangles
+            .iter()
+            .flat_map(|t| t.iter().flat_map(|i| i.to_le_bytes()))
+            .collect();
+        let view = self.view(&bytes, Some(ELEMENT_ARRAY_BUFFER));
+        self.accessors.push(json!({
+            "bufferView": view, "componentType": UNSIGNED_INT,
+            "count": triangles.len() * 3, "type": "SCALAR"
+        }));
+        self.accessors.len() - 1
+    }
+}
+
+fn png_bytes(image: &RgbaImage) -> Vec<u8> {
+    let mut out = Vec::new();
+    // Encoding an in-memory RGBA image to PNG cannot fail for valid dimensions.
+    let _ = image.write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png);
+    out
+}
+
+/// Encodes nodes as a glb.
+pub fn write_glb(nodes: &[ExportNode<'_>], generator: &str) -> Vec<u8> {
+    let mut buffer = BinaryBuffer {
+        bytes: Vec::new(),
+        views: Vec::new(),
+        accessors: Vec::new(),
+    };
+    let mut meshes = Vec::new();
+    let mut materials = Vec::new();
+    let mut textures = Vec::new();
+    let mut images = Vec::new();
+    let mut gltf_nodes = Vec::new();
+    for node in nodes {
+        let mesh = node.mesh;
+        if mesh.is_empty() {
+            continue;
+        }
+        let positions: Vec<f32> = mesh
+            .positions
+            .iter()
+            .flat_map(|p| [p.x, p.y, p.z])
+            .collect();
+        let normals: Vec<f32> = mesh.normals.iter().flat_map(|n| [n.x, n.y, n.z]).collect();
+        let uvs: Vec<f32> = mesh.uvs.iter().flat_map(|uv| [uv[0], uv[1]]).collect();
+        let position = buffer.accessor_f32(&positions, 3, true);
+        let normal = buffer.accessor_f32(&normals, 3, false);
+        let uv = buffer.accessor_f32(&uvs, 2, false);
+        let indices = buffer.accessor_indices(&mesh.triangles);
+        let mut material = json!({
+            "name": format!("{}_material", node.name),
+            "doubleSided": node.double_sided,
+            "pbrMetallicRoughness": {
+                "baseColorFactor": node.color,
+                "metallicFactor": 0.0,
+                "roughnessFactor": 0.85
+            }
+        });
+        if let Some(texture) = node.texture {
+            let view = buffer.view(&png_bytes(texture), None);
+            images.push(json!({"bufferView": view, "mimeType": "image/png"}));
+            textures.push(json!({"source": images.len() - 1, "sampler": 0}));
+            material["pbrMetallicRoughness"]["baseColorTexture"] =
+                json!({"index": textures.len() - 1});
+            material["pbrMetallicRoughness"]["baseColorFactor"] = json!([1.0, 1.0, 1.0, 1.0]);
+        }
+        materials.push(material);
+        meshes.push(json!({
+            "name": node.name,
+            "primitives": [{
+                "attributes": {"POSITION": position, "NORMAL": normal, "TEXCOORD_0": uv},
+                "indices": indices,
+                "material": materials.len() - 1,
+                "mode": 4
+            }]
+        }));
+        gltf_nodes.push(json!({"name": node.name, "mesh": meshes.len() - 1}));
+    }
+    buffer.align();
+    let mut document = json!({
+        "asset": {"version": "2.0", "generator": generator},
+        "scene": 0,
+        "scenes": [{"name": "plant", "nodes": (0..gltf_nodes.len()).collect::<Vec<_>>()}],
+        "nodes": gltf_nodes,
+    });
+    if !meshes.is_empty() {
+        document["meshes"] = json!(meshes);
+        document["materials"] = json!(materials);
+        document["accessors"] = json!(buffer.accessors);
+        document["bufferViews"] = json!(buffer.views);
+        document["buffers"] = json!([{"byteLength": buffer.bytes.len()}]);
+    }
+    if !textures.is_empty() {
+        document["textures"] = json!(textures);
+        document["images"] = json!(images);
+        document["samplers"] =
+            json!([{"magFilter": 9729, "minFilter": 9987, "wrapS": 10497, "wrapT": 10497}]);
+    }
+    let mut json_bytes = serde_json::to_vec(&document).unwrap_or_default();
+    while !json_bytes.len().is_multiple_of(4) {
+        json_bytes.push(b' ');
+    }
+    let has_bin = !buffer.bytes.is_empty();
+    let total = 12 + 8 + json_bytes.len() + if has_bin { 8 + buffer.bytes.len() } else { 0 };
+    let mut out = Vec::with_capacity(total);
+    for v in [
+        GLB_MAGIC,
+        2,
+        total as u32,
+        json_bytes.len() as u32,
+        CHUNK_JSON,
+    ] {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    out.extend_from_slice(&json_bytes);
+    if has_bin {
+        out.extend_from_slice(&(buffer.bytes.len() as u32).to_le_bytes());
+        out.extend_from_slice(&CHUNK_BIN.to_le_bytes());
+        out.extend_from_slice(&buffer.bytes);
+    }
+    out
+}
+
+/// Reads every named node's triangle mesh from glb bytes, transformed to world coordinates.
+pub fn read_glb_meshes(bytes: &[u8], path: &Path) -> Result<Vec<NamedMesh>, GltfError> {
+    let invalid = |message: String| GltfError::Invalid {
+        path: path.display().to_string(),
+        message,
+    };
+    let gltf = gltf::Gltf::from_slice(bytes).map_err(|e| invalid(e.to_string()))?;
+    let blob = gltf.blob.as_deref();
+    let mut out = Vec::new();
+    let Some(scene) = gltf.default_scene().or_else(|| gltf.scenes().next()) else {
+        return Ok(out);
+    };
+    let mut stack: Vec<(gltf::Node, Matrix4<f32>)> =
+        scene.nodes().map(|n| (n, Matrix4::identity())).collect();
+    while let Some((node, parent)) = stack.pop() {
+        let local = Matrix4::from_column_slice(&node.transform().matrix().concat());
+        let world = parent * local;
+        for child in node.children() {
+            stack.push((child, world));
+        }
+        let Some(mesh) = node.mesh() else { continue };
+        let name = node
+            .name()
+            .or(mesh.name())
+            .map(str::to_owned)
+            .unwrap_or_else(|| format!("node_{}", node.index()));
+        let normal_matrix = world
+            .fixed_view::<3, 3>(0, 0)
+            .try_inverse()
+            .map(|m| m.transpose())
+            .unwrap_or_else(nalgebra::Matrix3::identity);
+        let mut combined = TriMesh::default();
+        for primitive in mesh.primitives() {
+            if primitive.mode() != gltf::mesh::Mode::Triangles {
+                continue;
+            }
+            let reader = primitive.reader(|buffer| match buffer.source() {
+                gltf::buffer::Source::Bin => blob,
+                gltf::buffer::Source::Uri(_) => None,
+            });
+            let positions: Vec<Point3<f32>> = reader
+                .read_positions()
+                .ok_or_else(|| invalid(format!("node '{name}' has no positions")))?
+                .map(|p| {
+                    let h = world * nalgebra::Vector4::new(p[0], p[1], p[2], 1.0);
+                    Point3::new(h.x, h.y, h.z)
+                })
+                .collect();
+            let n = positions.len();
+            let normals: Option<Vec<Vector3<f32>>> = reader.read_normals().map(|it| {
+                it.map(|v| (normal_matrix * Vector3::new(v[0], v[1], v[2])).normalize())
+                    .collect()
+            });
+            let uvs: Vec<[f32; 2]> = reader
+                .read_tex_coords(0)
+                .map(|t| t.into_f32().collect())
+                .unwrap_or_else(|| vec![[0.0, 0.0]; n]);
+            let indices: Vec<u32> = match reader.read_indices() {
+                Some(indices) => indices.into_u32().collect(),
+                None => (0..n as u32).collect(),
+            };
+            if indices.iter().any(|&i| i as usize >= n) || uvs.len() != n {
+                return Err(invalid(format!("node '{name}' has out-of-range indices")));
+            }
+            let mut part = TriMesh {
+                positions,
+                normals: normals.unwrap_or_default(),
+                uvs,
+                triangles: indices
+                    .chunks_exact(3)
+                    .map(|c| [c[0], c[1], c[2]])
+                    .collect(),
+            };
+            if part.normals.len() != n {
+                part.compute_normals();
+            }
+            combined.append(&part);
+        }
+        out.push(NamedMesh {
+            name,
+            mesh: combined,
+        });
+    }
+    out.sort_by(|a, b| a.name.cmp(&b.name));
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn triangle() -> TriMesh {
+        let mut mesh = TriMesh {
+            positions: vec![
+                Point3::new(0.0, 0.0, 0.0),
+                Point3::new(1.0, 0.0, 0.5),
+                Point3::new(0.0, 2.0, 0.0),
+            ],
+            normals: Vec::new(),
+            uvs: vec![[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]],
+            triangles: vec![[0, 1, 2]],
+        };
+        mesh.compute_normals();
+        mesh
+    }
+
+    #[test]
+    fn glb_round_trips_through_the_gltf_crate() {
+        let mesh = triangle();
+        let texture = RgbaImage::from_pixel(4, 4, image::Rgba([10, 200, 30, 255]));
+        let nodes = vec![
+            ExportNode {
+                name: "leaf_000".into(),
+                mesh: &mesh,
+                texture: Some(&texture),
+                color: [1.0; 4],
+                double_sided: true,
+            },
+            ExportNode {
+                name: "branch_003".into(),
+                mesh: &mesh,
+                texture: None,
+                color: [0.4, 0.3, 0.2, 1.0],
+                double_sided: false,
+            },
+        ];
+        let bytes = write_glb(&nodes, "frond test");
+        assert_eq!(&bytes[0..4], b"glTF");
+        assert_eq!(
+            u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize,
+            bytes.len()
+        );
+        let back = read_glb_meshes(&bytes, Path::new("t.glb")).unwrap();
+        assert_eq!(back.len(), 2);
+        assert_eq!(back[0].name, "branch_003");
+        assert_eq!(back[1].name, "leaf_000");
+        assert_eq!(back[1].mesh.positions, mesh.positions);
+        assert_eq!(back[1].mesh.triangles, mesh.triangles);
+        assert_eq!(back[1].mesh.uvs, mesh.uvs);
+    }
+
+    #[test]
+    fn garbage_is_an_error() {
+        assert!(read_glb_meshes(b"not a glb", Path::new("x.glb")).is_err());
+    }
+}

@@ -1,0 +1,67 @@
+//! The plant model (seed 004 §6–7): reconstructed leaves and branches with their meshes and
+//! textures, and its exports. The glTF binary export is the evaluation contract: nodes
+//! `leaf_NNN` and `branch_NNN` with identity transforms, positions in the input's world frame.
+
+pub mod gltf;
+
+use std::path::Path;
+
+use nalgebra::Point3;
+
+use crate::scene::ply::{Column, Element, Ply, ScalarType, encode_ply_binary};
+use crate::util::atomic::write_atomic;
+
+/// The labelled point cloud of the output contract (`segmentation.ply`): the input points with
+/// `x y z red green blue`, `leaf_id` (−1 = not a leaf) and the COLMAP `point_id`.
+pub fn segmentation_ply(
+    positions: &[Point3<f64>],
+    colors: &[[u8; 3]],
+    point_ids: &[u64],
+    leaf_ids: &[i64],
+) -> Ply {
+    let n = positions.len();
+    let coordinate = |name: &str, axis: usize| {
+        Column::scalar(
+            name,
+            ScalarType::F64,
+            positions.iter().map(|p| p[axis]).collect(),
+        )
+    };
+    let channel = |name: &str, c: usize| {
+        Column::scalar(
+            name,
+            ScalarType::U8,
+            colors.iter().map(|rgb| rgb[c] as f64).collect(),
+        )
+    };
+    Ply {
+        comments: vec!["frond segmentation: leaf_id -1 = not a leaf".into()],
+        elements: vec![Element {
+            name: "vertex".into(),
+            count: n,
+            columns: vec![
+                coordinate("x", 0),
+                coordinate("y", 1),
+                coordinate("z", 2),
+                channel("red", 0),
+                channel("green", 1),
+                channel("blue", 2),
+                Column::scalar(
+                    "leaf_id",
+                    ScalarType::I32,
+                    leaf_ids.iter().map(|&l| l as f64).collect(),
+                ),
+                Column::scalar(
+                    "point_id",
+                    ScalarType::U32,
+                    point_ids.iter().map(|&i| i as f64).collect(),
+                ),
+            ],
+        }],
+    }
+}
+
+/// Writes `segmentation.ply` atomically.
+pub fn write_segmentation_ply(path: &Path, ply: &Ply) -> std::io::Result<()> {
+    write_atomic(path, &encode_ply_binary(ply))
+}

@@ -1,0 +1,255 @@
+//! Procedural textures for synthetic plants and their surroundings: leaves (own hue, veins,
+//! fine noise), bark, pot, soil, floor tiles and a backdrop. Deterministic per seed.
+//!
+//! Every texture has high-frequency detail, as real surfaces do: multi-view stereo finds points
+//! on texture, and the segmentation's 2D term (seed 004 §5.1) needs colour edges between leaves.
+
+use image::{Rgba, RgbaImage};
+
+use crate::util::rng::Rng;
+
+/// Smooth value noise on a periodic integer lattice (period `period` cells), in [0, 1].
+#[derive(Clone, Debug)]
+pub struct ValueNoise {
+    period: usize,
+    lattice: Vec<f32>,
+}
+
+impl ValueNoise {
+    pub fn new(period: usize, rng: &mut Rng) -> Self {
+        let period = period.max(1);
+        let lattice = (0..period * period).map(|_| rng.uniform() as f32).collect();
+        Self { period, lattice }
+    }
+
+    fn at(&self, x: i64, y: i64) -> f32 {
+        let p = self.period as i64;
+        self.lattice[(y.rem_euclid(p) * p + x.rem_euclid(p)) as usize]
+    }
+
+    /// Noise at `(u, v)` ∈ [0, 1)² (tiles seamlessly).
+    pub fn sample(&self, u: f32, v: f32) -> f32 {
+        let x = u * self.period as f32;
+        let y = v * self.period as f32;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let smooth = |t: f32| t * t * (3.0 - 2.0 * t);
+        let (sx, sy) = (smooth(fx), smooth(fy));
+        let (ix, iy) = (x0 as i64, y0 as i64);
+        let top = self.at(ix, iy) * (1.0 - sx) + self.at(ix + 1, iy) * sx;
+        let bottom = self.at(ix, iy + 1) * (1.0 - sx) + self.at(ix + 1, iy + 1) * sx;
+        top * (1.0 - sy) + bottom * sy
+    }
+}
+
+/// Fractal sum of value-noise octaves, normalised to [0, 1].
+#[derive(Clone, Debug)]
+pub struct Fbm {
+    octaves: Vec<ValueNoise>,
+}
+
+impl Fbm {
+    pub fn new(base_period: usize, octaves: usize, rng: &mut Rng) -> Self {
+        Self {
+            octaves: (0..octaves)
+                .map(|o| ValueNoise::new(base_period << o, rng))
+                .collect(),
+        }
+    }
+
+    pub fn sample(&self, u: f32, v: f32) -> f32 {
+        let mut sum = 0.0;
+        let mut weight = 1.0;
+        let mut total = 0.0;
+        for octave in &self.octaves {
+            sum += weight * octave.sample(u, v);
+            total += weight;
+            weight *= 0.5;
+        }
+        sum / total
+    }
+}
+
+/// HSV (h in degrees, s and v in [0, 1]) to 8-bit sRGB.
+pub fn hsv_to_rgb(h: f32, s: f32, v: f32) -> [u8; 3] {
+    let h = h.rem_euclid(360.0) / 60.0;
+    let (s, v) = (s.clamp(0.0, 1.0), v.clamp(0.0, 1.0));
+    let c = v * s;
+    let x = c * (1.0 - ((h % 2.0) - 1.0).abs());
+    let (r, g, b) = match h as u32 {
+        0 => (c, x, 0.0),
+        1 => (x, c, 0.0),
+        2 => (0.0, c, x),
+        3 => (0.0, x, c),
+        4 => (x, 0.0, c),
+        _ => (c, 0.0, x),
+    };
+    let m = v - c;
+    [r, g, b].map(|channel| ((channel + m) * 255.0).round().clamp(0.0, 255.0) as u8)
+}
+
+fn fill(width: u32, height: u32, f: impl Fn(f32, f32) -> [u8; 3]) -> RgbaImage {
+    RgbaImage::from_fn(width, height, |x, y| {
+        let u = (x as f32 + 0.5) / width as f32;
+        let v = (y as f32 + 0.5) / height as f32;
+        let [r, g, b] = f(u, v);
+        Rgba([r, g, b, 255])
+    })
+}
+
+/// Appearance parameters of one leaf.
+#[derive(Clone, Copy, Debug)]
+pub struct LeafLook {
+    pub hue: f32,
+    pub saturation: f32,
+    pub value: f32,
+    /// Secondary veins per unit of leaf length (texture u).
+    pub vein_count: f32,
+    /// Strength of the fine noise (fraction of value).
+    pub noise: f32,
+}
+
+impl LeafLook {
+    /// A random green with per-leaf variation.
+    pub fn random(rng: &mut Rng) -> Self {
+        Self {
+            hue: rng.range(88.0, 135.0) as f32,
+            saturation: rng.range(0.45, 0.85) as f32,
+            value: rng.range(0.32, 0.62) as f32,
+            vein_count: rng.range(7.0, 12.0) as f32,
+            noise: rng.range(0.08, 0.16) as f32,
+        }
+    }
+}
+
+/// A leaf texture. `u` runs from base (0) to tip (1) along the midrib; `v` across the blade
+/// from one margin (0) through the midrib (0.5) to the other (1).
+pub fn leaf_texture(look: &LeafLook, size: u32, rng: &mut Rng) -> RgbaImage {
+    let coarse = Fbm::new(4, 3, rng);
+    let fine = Fbm::new(32, 2, rng);
+    fill(size, size, |u, v| {
+        let across = (v - 0.5).abs() * 2.0; // 0 at the midrib, 1 at the margin
+        let mut value = look.value * (0.88 + 0.24 * coarse.sample(u, v));
+        value *= 1.0 - look.noise + 2.0 * look.noise * fine.sample(u, v);
+        let mut saturation = look.saturation;
+        // Midrib: a light stripe.
+        let midrib = (1.0 - across / 0.035).max(0.0);
+        // Secondary veins leave the midrib toward the tip at ~35°.
+        let phase = u * look.vein_count - across * 0.7;
+        let distance = (phase - phase.round()).abs();
+        let vein = (1.0 - distance / 0.06).max(0.0) * (1.0 - across).powf(0.5);
+        let light = midrib.max(0.6 * vein);
+        value += 0.22 * light;
+        saturation *= 1.0 - 0.35 * light;
+        // Margins slightly darker.
+        if across > 0.9 {
+            value *= 1.0 - 0.8 * (across - 0.9);
+        }
+        hsv_to_rgb(
+            look.hue + 6.0 * (coarse.sample(v, u) - 0.5),
+            saturation,
+            value,
+        )
+    })
+}
+
+/// Bark for stems and petioles: longitudinal streaks.
+pub fn bark_texture(size: u32, hue: f32, rng: &mut Rng) -> RgbaImage {
+    let streaks = Fbm::new(16, 3, rng);
+    let fine = ValueNoise::new(64, rng);
+    fill(size, size, |u, v| {
+        let value = 0.3 + 0.2 * streaks.sample(u, v * 0.125) + 0.1 * fine.sample(u, v);
+        hsv_to_rgb(hue, 0.45, value)
+    })
+}
+
+/// Terracotta pot with mottling.
+pub fn pot_texture(size: u32, rng: &mut Rng) -> RgbaImage {
+    let mottle = Fbm::new(8, 4, rng);
+    fill(size, size, |u, v| {
+        let m = mottle.sample(u, v);
+        hsv_to_rgb(18.0 + 6.0 * m, 0.62, 0.45 + 0.25 * m)
+    })
+}
+
+/// Dark, grainy soil.
+pub fn soil_texture(size: u32, rng: &mut Rng) -> RgbaImage {
+    let grain = Fbm::new(32, 3, rng);
+    fill(size, size, |u, v| {
+        let g = grain.sample(u, v);
+        hsv_to_rgb(28.0, 0.5, 0.12 + 0.22 * g * g)
+    })
+}
+
+/// Floor tiles: a grid of slightly different stone tiles with grout lines and grain.
+pub fn floor_texture(size: u32, tiles: u32, rng: &mut Rng) -> RgbaImage {
+    let grain = Fbm::new(16, 4, rng);
+    let tile_shade: Vec<f32> = (0..tiles * tiles).map(|_| rng.uniform() as f32).collect();
+    fill(size, size, |u, v| {
+        let (tu, tv) = (u * tiles as f32, v * tiles as f32);
+        let (fu, fv) = (tu.fract(), tv.fract());
+        let grout = fu < 0.03 || fv < 0.03;
+        let shade = tile_shade[(tv as u32 % tiles * tiles + tu as u32 % tiles) as usize];
+        let g = grain.sample(u, v);
+        if grout {
+            hsv_to_rgb(35.0, 0.1, 0.25 + 0.1 * g)
+        } else {
+            hsv_to_rgb(
+                30.0 + 10.0 * shade,
+                0.25,
+                0.5 + 0.15 * shade + 0.25 * (g - 0.5),
+            )
+        }
+    })
+}
+
+/// A backdrop: a soft large-scale pattern with fine paper grain (like a textured wall).
+pub fn backdrop_texture(width: u32, height: u32, rng: &mut Rng) -> RgbaImage {
+    let pattern = Fbm::new(6, 5, rng);
+    let grain = ValueNoise::new(128, rng);
+    fill(width, height, |u, v| {
+        let p = pattern.sample(u, v);
+        hsv_to_rgb(
+            210.0 + 40.0 * p,
+            0.18 + 0.15 * p,
+            0.55 + 0.3 * p + 0.08 * grain.sample(u, v),
+        )
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hsv_primaries() {
+        assert_eq!(hsv_to_rgb(0.0, 1.0, 1.0), [255, 0, 0]);
+        assert_eq!(hsv_to_rgb(120.0, 1.0, 1.0), [0, 255, 0]);
+        assert_eq!(hsv_to_rgb(240.0, 1.0, 0.5), [0, 0, 128]);
+        assert_eq!(hsv_to_rgb(77.0, 0.0, 1.0), [255, 255, 255]);
+    }
+
+    #[test]
+    fn noise_tiles_and_stays_in_range() {
+        let mut rng = Rng::seed_from(5);
+        let noise = ValueNoise::new(8, &mut rng);
+        for k in 0..100 {
+            let v = k as f32 / 100.0;
+            let s = noise.sample(0.3, v);
+            assert!((0.0..=1.0).contains(&s));
+            assert!((noise.sample(0.0, v) - noise.sample(1.0, v)).abs() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn leaf_textures_differ_per_leaf_and_are_green() {
+        let mut rng = Rng::seed_from(9);
+        let a = leaf_texture(&LeafLook::random(&mut rng), 64, &mut rng);
+        let b = leaf_texture(&LeafLook::random(&mut rng), 64, &mut rng);
+        assert_ne!(a, b);
+        let mean = |img: &RgbaImage, c: usize| {
+            img.pixels().map(|p| p[c] as f64).sum::<f64>() / img.pixels().len() as f64
+        };
+        assert!(mean(&a, 1) > mean(&a, 0) && mean(&a, 1) > mean(&a, 2));
+    }
+}

@@ -1,0 +1,52 @@
+//! Helpers shared by integration tests.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// `../shared/data/<relative>` (real third-party data beside the checkout).
+pub fn shared_data(relative: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data")
+        .join(relative)
+}
+
+/// Whether `colmap` runs here; on CI (CI=true) its absence is a failure.
+pub fn colmap_available() -> bool {
+    let found = Command::new("colmap").arg("help").output().is_ok();
+    if !found && std::env::var("CI").is_ok_and(|v| v == "true") {
+        panic!("colmap is not on PATH on CI: scripts/setup.sh should have installed it");
+    }
+    if !found {
+        eprintln!("skipping: colmap is not on PATH (run scripts/setup.sh)");
+    }
+    found
+}
+
+/// Runs colmap and returns stdout + stderr; panics with the output on failure.
+pub fn run_colmap(args: &[&str]) -> String {
+    let output = Command::new("colmap")
+        .args(args)
+        .output()
+        .expect("colmap runs");
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(output.status.success(), "colmap {args:?} failed:\n{text}");
+    text
+}
+
+/// The "Name: value" statistics `colmap model_analyzer` prints.
+pub fn analyze(dir: &Path) -> std::collections::HashMap<String, f64> {
+    let text = run_colmap(&["model_analyzer", "--path", dir.to_str().unwrap()]);
+    text.lines()
+        .filter_map(|line| {
+            let (key, value) = line.rsplit_once(": ")?;
+            let key = key.rsplit("] ").next().unwrap_or(key).trim().to_owned();
+            let value = value.trim().trim_end_matches("px").parse().ok()?;
+            Some((key, value))
+        })
+        .collect()
+}
