@@ -4,6 +4,8 @@
 //! as textured meshes, branches as generalized cylinders) comes out. Stages, in data-flow order:
 //!
 //! - [`scene`]: COLMAP models (text and binary, every camera model), images, dense points.
+//! - [`graph`]: leaf segmentation (kNN graph with 3D/2D weights, threshold partition,
+//!   normalized cuts, foreground separation).
 //! - [`mesh`], [`branch`]: triangle meshes and generalized cylinders shared by every stage.
 //! - [`render`]: the headless wgpu render core.
 //! - [`synth`]: synthetic plants with ground truth; [`eval`]: scoring reconstructions.
@@ -11,6 +13,7 @@
 
 pub mod branch;
 pub mod eval;
+pub mod graph;
 pub mod mesh;
 pub mod model;
 pub mod render;

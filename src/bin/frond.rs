@@ -8,6 +8,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use frond::eval::{EvalOptions, GroundTruth, Prediction, align_to_ground_truth, evaluate};
+use frond::graph::pipeline::{SegmentOptions, Segmentation, segment_scene, write_segmentation};
 use frond::scene::{ModelFormat, Scene, SceneSource, stats, write_model};
 use frond::synth::{Preset, SynthOptions, write_dataset};
 use frond::util::progress::Progress;
@@ -73,6 +74,24 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Segment the plant's points into leaves (kNN graph, 3D/2D weights, normalized cuts).
+    Segment {
+        #[command(flatten)]
+        scene: SceneArgs,
+        #[arg(long)]
+        out: PathBuf,
+        #[command(flatten)]
+        params: SegmentArgs,
+    },
+    /// Reconstruct a plant from a COLMAP folder (today: foreground and leaf segmentation).
+    Reconstruct {
+        #[command(flatten)]
+        scene: SceneArgs,
+        #[arg(long)]
+        out: PathBuf,
+        #[command(flatten)]
+        params: SegmentArgs,
+    },
     /// Score a reconstruction (segmentation.ply, plant.glb) against synthetic ground truth.
     Eval {
         /// The synthetic dataset (with gt/).
@@ -88,6 +107,39 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+}
+
+/// Segmentation parameters (seed 004 §5.1 defaults).
+#[derive(Args, Clone, Copy)]
+struct SegmentArgs {
+    /// Weight of the image term α (0 = 3D distance only).
+    #[arg(long, default_value_t = 0.5)]
+    alpha: f64,
+    /// Threshold k, in standard deviations of the 3D and 2D distances.
+    #[arg(long, default_value_t = 3.0)]
+    k: f64,
+    /// Nearest neighbours per point K.
+    #[arg(long, default_value_t = 3)]
+    knn: usize,
+}
+
+impl SegmentArgs {
+    fn options(&self) -> Result<SegmentOptions> {
+        if !(0.0..=1.0).contains(&self.alpha) {
+            bail!("--alpha must lie in [0, 1], got {}", self.alpha);
+        }
+        if self.k <= 0.0 || !self.k.is_finite() {
+            bail!("--k must be positive, got {}", self.k);
+        }
+        if self.knn == 0 {
+            bail!("--knn must be at least 1");
+        }
+        let mut options = SegmentOptions::default();
+        options.graph.alpha = self.alpha;
+        options.graph.k = self.k;
+        options.graph.knn = self.knn;
+        Ok(options)
+    }
 }
 
 fn parse_size(text: &str) -> Result<(u32, u32), String> {
@@ -305,6 +357,62 @@ fn eval(gt: &Path, pred: &Path, pred_model: Option<&Path>, json: bool) -> Result
     Ok(())
 }
 
+fn run_segmentation(
+    scene_args: &SceneArgs,
+    params: &SegmentArgs,
+    out: &Path,
+) -> Result<(Scene, Segmentation)> {
+    let options = params.options()?;
+    let scene = load_scene(scene_args.source()?)?;
+    let progress = BarProgress::new();
+    let segmentation = segment_scene(&scene, &options, &progress)
+        .with_context(|| format!("segmenting {}", scene.source.model_dir.display()))?;
+    progress.bar.finish_and_clear();
+    write_segmentation(out, &segmentation)
+        .with_context(|| format!("writing segmentation to {}", out.display()))?;
+    let t = &segmentation.timings;
+    eprintln!(
+        "{} points ({} on the plant), {} segments, {} leaves -> {}",
+        segmentation.points.len(),
+        segmentation
+            .class_counts()
+            .get("plant")
+            .copied()
+            .unwrap_or(0),
+        segmentation.segments.len(),
+        segmentation.num_leaves(),
+        out.display()
+    );
+    eprintln!(
+        "timings: foreground {:.2} s, gradients {:.2} s, graph {:.2} s, partition {:.2} s, total {:.2} s",
+        t.foreground, t.gradients, t.graph, t.partition, t.total
+    );
+    Ok((scene, segmentation))
+}
+
+fn reconstruct(scene_args: &SceneArgs, params: &SegmentArgs, out: &Path) -> Result<()> {
+    let started = std::time::Instant::now();
+    let (scene, segmentation) = run_segmentation(scene_args, params, out)?;
+    let report = serde_json::json!({
+        "frond": env!("CARGO_PKG_VERSION"),
+        "input": scene.source.model_dir,
+        "stages": ["foreground", "segmentation"],
+        "points": segmentation.points.len(),
+        "foreground": segmentation.class_counts(),
+        "segments": segmentation.segments.len(),
+        "leaves": segmentation.num_leaves(),
+        "parameters": segmentation.options,
+        "timings": {
+            "segmentation": segmentation.timings,
+            "total": started.elapsed().as_secs_f64(),
+        },
+    });
+    let path = out.join("report.json");
+    frond::util::atomic::write_atomic(&path, serde_json::to_string_pretty(&report)?.as_bytes())
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
 fn init_logging(verbose: u8) {
     let default = match verbose {
         0 => "warn",
@@ -342,6 +450,8 @@ fn main() -> Result<()> {
         } => synth(
             *preset, *seed, *views, *size, *points, *noise, *outliers, *no_points, out,
         ),
+        Command::Segment { scene, out, params } => run_segmentation(scene, params, out).map(|_| ()),
+        Command::Reconstruct { scene, out, params } => reconstruct(scene, params, out),
         Command::Eval {
             gt,
             pred,

@@ -310,7 +310,7 @@ pub fn write_dataset(
     // Points.
     let points = if options.with_points {
         progress.stage("sampling points", 0);
-        sample_points(options, &plant, &scene, &view_cameras, &renders)
+        sample_points(options, &scene, &view_cameras, &renders)
     } else {
         Vec::new()
     };
@@ -446,28 +446,51 @@ fn upload_scene(
     Ok(gpu)
 }
 
-/// Samples surface points in proportion to area × density, keeps those seen in at least two
-/// views (depth-tested against the renders), then thins to the target count.
+/// Share of the point budget per part, as multi-view stereo on a plant capture yields it:
+/// most points on the plant, a minority on pot, floor and backdrop.
+fn point_share(part: Part) -> f64 {
+    match part {
+        Part::Leaf | Part::Stem => 0.72,
+        Part::Pot => 0.08,
+        Part::Floor => 0.13,
+        Part::Background => 0.07,
+    }
+}
+
+/// Which budget a part draws from (leaves and stems share the plant's).
+fn budget_group(part: Part) -> usize {
+    match part {
+        Part::Leaf | Part::Stem => 0,
+        Part::Pot => 1,
+        Part::Floor => 2,
+        Part::Background => 3,
+    }
+}
+
+/// Samples surface points uniformly by area within each part group, keeps those seen in at
+/// least two views (depth-tested against the renders), then thins each group to its share of
+/// the target count.
 fn sample_points(
     options: &SynthOptions,
-    plant: &SynthPlant,
     scene: &SynthScene,
     cameras: &[ViewCamera],
     renders: &[RenderOutput],
 ) -> Vec<SampledPoint> {
-    let weights: Vec<f64> = scene
-        .objects
-        .iter()
-        .map(|o| o.mesh.area() * o.point_density)
-        .collect();
-    let total: f64 = weights.iter().sum();
-    let pool = (options.target_points as f64 * 2.5) as usize;
+    let mut group_area = [0.0f64; 4];
+    for object in &scene.objects {
+        group_area[budget_group(object.part)] += object.mesh.area();
+    }
+    let quota = |part: Part| (point_share(part) * options.target_points as f64) as usize;
+    // Oversample: hidden samples are discarded by the visibility test.
+    let oversample = 3.0;
     let candidates: Vec<(usize, Point3<f64>)> = scene
         .objects
         .iter()
         .enumerate()
         .flat_map(|(i, object)| {
-            let count = ((pool as f64 * weights[i] / total).round() as usize).max(1);
+            let group = budget_group(object.part);
+            let share = object.mesh.area() / group_area[group].max(1e-12);
+            let count = ((oversample * quota(object.part) as f64 * share).round() as usize).max(1);
             let mut rng = Rng::stream(options.seed ^ 0x9017, i as u64);
             object
                 .mesh
@@ -477,7 +500,7 @@ fn sample_points(
                 .collect::<Vec<_>>()
         })
         .collect();
-    let mut kept: Vec<SampledPoint> = candidates
+    let kept: Vec<SampledPoint> = candidates
         .par_iter()
         .filter_map(|&(object, position)| {
             let object_id = scene.objects[object].object_id;
@@ -497,17 +520,76 @@ fn sample_points(
         })
         .collect();
     let mut rng = Rng::seed_from(options.seed ^ 0x7411);
-    if kept.len() > options.target_points {
-        rng.shuffle(&mut kept);
-        kept.truncate(options.target_points);
-        // Keep a stable, spatially meaningful order: by object, then as sampled.
-        kept.sort_by(|a, b| {
-            a.object
-                .cmp(&b.object)
-                .then(a.true_position.x.total_cmp(&b.true_position.x))
-        });
+    let mut candidates_per_group = [0usize; 4];
+    for (object, _) in &candidates {
+        candidates_per_group[budget_group(scene.objects[*object].part)] += 1;
     }
-    let _ = plant;
+    let mut by_group: [Vec<SampledPoint>; 4] = Default::default();
+    for point in kept {
+        by_group[budget_group(scene.objects[point.object].part)].push(point);
+    }
+    let mut points = Vec::new();
+    for (group, mut members) in by_group.into_iter().enumerate() {
+        let part = [Part::Leaf, Part::Pot, Part::Floor, Part::Background][group];
+        rng.shuffle(&mut members);
+        // Even spacing, as multi-view stereo's regularly resampled image points have: thin the
+        // visible samples to a Poisson-disk set whose density meets the quota.
+        let visible_area =
+            group_area[group] * members.len() as f64 / candidates_per_group[group].max(1) as f64;
+        let radius = 0.7 * (visible_area / quota(part).max(1) as f64).sqrt();
+        let mut members = poisson_disk_thin(members, radius);
+        if members.len() > quota(part) {
+            members.truncate(quota(part));
+        }
+        points.extend(members);
+    }
+    // A stable, spatially meaningful order: by object, then along x.
+    points.sort_by(|a, b| {
+        a.object
+            .cmp(&b.object)
+            .then(a.true_position.x.total_cmp(&b.true_position.x))
+    });
+    points
+}
+
+/// Keeps points (in the given order) that lie at least `radius` from every point kept before
+/// them (dart throwing with a grid hash).
+fn poisson_disk_thin(points: Vec<SampledPoint>, radius: f64) -> Vec<SampledPoint> {
+    if radius <= 0.0 || !radius.is_finite() {
+        return points;
+    }
+    let cell = |p: &Point3<f64>| {
+        [
+            (p.x / radius).floor() as i64,
+            (p.y / radius).floor() as i64,
+            (p.z / radius).floor() as i64,
+        ]
+    };
+    let mut grid: std::collections::HashMap<[i64; 3], Vec<Point3<f64>>> =
+        std::collections::HashMap::new();
+    let mut kept = Vec::with_capacity(points.len());
+    for point in points {
+        let c = cell(&point.true_position);
+        let mut free = true;
+        'search: for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    if let Some(others) = grid.get(&[c[0] + dx, c[1] + dy, c[2] + dz])
+                        && others
+                            .iter()
+                            .any(|o| (o - point.true_position).norm() < radius)
+                    {
+                        free = false;
+                        break 'search;
+                    }
+                }
+            }
+        }
+        if free {
+            grid.entry(c).or_default().push(point.true_position);
+            kept.push(point);
+        }
+    }
     kept
 }
 

@@ -64,8 +64,6 @@ pub struct SceneObject {
     pub mesh: TriMesh,
     /// Index into [`SynthScene::textures`].
     pub texture: usize,
-    /// Relative density of reconstructed points per unit area (MVS finds more on the plant).
-    pub point_density: f64,
 }
 
 /// All surfaces of a synthetic capture.
@@ -189,7 +187,6 @@ pub fn build_scene(plant: &SynthPlant, backdrop_radius: f64, seed: u64) -> Synth
             branch_id: -1,
             mesh: leaf.mesh.clone(),
             texture: textures.len() - 1,
-            point_density: 1.0,
         });
     }
     textures.push(texture::bark_texture(
@@ -216,7 +213,6 @@ pub fn build_scene(plant: &SynthPlant, backdrop_radius: f64, seed: u64) -> Synth
             branch_id: branch.id as i32,
             mesh: branch.cylinder.mesh(&meshing),
             texture: bark,
-            point_density: 1.0,
         });
     }
     let (pot_mesh, soil_mesh) = pot_meshes(&plant.pot);
@@ -228,7 +224,6 @@ pub fn build_scene(plant: &SynthPlant, backdrop_radius: f64, seed: u64) -> Synth
         branch_id: -1,
         mesh: pot_mesh,
         texture: textures.len() - 1,
-        point_density: 0.5,
     });
     textures.push(texture::soil_texture(256, &mut rng));
     objects.push(SceneObject {
@@ -238,24 +233,24 @@ pub fn build_scene(plant: &SynthPlant, backdrop_radius: f64, seed: u64) -> Synth
         branch_id: -1,
         mesh: soil_mesh,
         texture: textures.len() - 1,
-        point_density: 0.5,
     });
-    textures.push(texture::floor_texture(1024, 4, &mut rng));
+    // The floor and backdrop textures each cover their surface once (no repetition), with
+    // texels about as large as a pixel at the cameras' distance.
+    textures.push(texture::floor_texture(2048, &mut rng));
     objects.push(SceneObject {
         object_id: 200_003,
         part: Part::Floor,
         leaf_id: -1,
         branch_id: -1,
-        mesh: floor_mesh(backdrop_radius, 0.5),
+        mesh: floor_mesh(backdrop_radius, 2.0 * backdrop_radius),
         texture: textures.len() - 1,
-        point_density: 0.08,
     });
-    textures.push(texture::backdrop_texture(2048, 512, &mut rng));
+    textures.push(texture::backdrop_texture(4096, 1024, &mut rng));
     let wall_height = 1.6 * backdrop_radius;
     let backdrop = revolve(
         &[(backdrop_radius, 0.0), (backdrop_radius, wall_height)],
         128,
-        3.0,
+        1.0,
         (1.0 / wall_height) as f32,
     );
     objects.push(SceneObject {
@@ -265,7 +260,6 @@ pub fn build_scene(plant: &SynthPlant, backdrop_radius: f64, seed: u64) -> Synth
         branch_id: -1,
         mesh: backdrop,
         texture: textures.len() - 1,
-        point_density: 0.03,
     });
     SynthScene {
         objects,

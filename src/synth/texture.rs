@@ -113,11 +113,11 @@ impl LeafLook {
     /// A random green with per-leaf variation.
     pub fn random(rng: &mut Rng) -> Self {
         Self {
-            hue: rng.range(88.0, 135.0) as f32,
+            hue: rng.range(82.0, 140.0) as f32,
             saturation: rng.range(0.45, 0.85) as f32,
-            value: rng.range(0.32, 0.62) as f32,
+            value: rng.range(0.30, 0.66) as f32,
             vein_count: rng.range(7.0, 12.0) as f32,
-            noise: rng.range(0.08, 0.16) as f32,
+            noise: rng.range(0.05, 0.10) as f32,
         }
     }
 }
@@ -138,9 +138,11 @@ pub fn leaf_texture(look: &LeafLook, size: u32, rng: &mut Rng) -> RgbaImage {
         let phase = u * look.vein_count - across * 0.7;
         let distance = (phase - phase.round()).abs();
         let vein = (1.0 - distance / 0.06).max(0.0) * (1.0 - across).powf(0.5);
-        let light = midrib.max(0.6 * vein);
-        value += 0.22 * light;
-        saturation *= 1.0 - 0.35 * light;
+        // Veins are lighter than the blade, the midrib most (upper leaf surfaces show them
+        // subtly; they must not out-contrast the edges between leaves).
+        let light = midrib.max(0.5 * vein);
+        value *= 1.0 + 0.25 * light;
+        saturation *= 1.0 - 0.25 * light;
         // Margins slightly darker.
         if across > 0.9 {
             value *= 1.0 - 0.8 * (across - 0.9);
@@ -181,40 +183,98 @@ pub fn soil_texture(size: u32, rng: &mut Rng) -> RgbaImage {
     })
 }
 
-/// Floor tiles: a grid of slightly different stone tiles with grout lines and grain.
-pub fn floor_texture(size: u32, tiles: u32, rng: &mut Rng) -> RgbaImage {
-    let grain = Fbm::new(16, 4, rng);
-    let tile_shade: Vec<f32> = (0..tiles * tiles).map(|_| rng.uniform() as f32).collect();
-    fill(size, size, |u, v| {
-        let (tu, tv) = (u * tiles as f32, v * tiles as f32);
-        let (fu, fv) = (tu.fract(), tv.fract());
-        let grout = fu < 0.03 || fv < 0.03;
-        let shade = tile_shade[(tv as u32 % tiles * tiles + tu as u32 % tiles) as usize];
-        let g = grain.sample(u, v);
-        if grout {
-            hsv_to_rgb(35.0, 0.1, 0.25 + 0.1 * g)
-        } else {
-            hsv_to_rgb(
-                30.0 + 10.0 * shade,
-                0.25,
-                0.5 + 0.15 * shade + 0.25 * (g - 0.5),
-            )
+/// Paints `count` random discs (log-uniform radii between `min_radius` and `max_radius`
+/// texels, colours from `palette` with jittered value) onto `image`.
+fn paint_discs(
+    image: &mut RgbaImage,
+    count: usize,
+    min_radius: f64,
+    max_radius: f64,
+    palette: &[(f32, f32, f32)],
+    rng: &mut Rng,
+) {
+    let (w, h) = image.dimensions();
+    for _ in 0..count {
+        let radius = min_radius * (max_radius / min_radius).powf(rng.uniform());
+        let (cx, cy) = (rng.range(0.0, w as f64), rng.range(0.0, h as f64));
+        let (hue, saturation, value) = palette[rng.below(palette.len())];
+        let jitter = rng.range(0.75, 1.25) as f32;
+        let [r, g, b] = hsv_to_rgb(
+            hue + rng.range(-12.0, 12.0) as f32,
+            saturation,
+            value * jitter,
+        );
+        let aspect = rng.range(0.6, 1.0);
+        let angle = rng.range(0.0, std::f64::consts::PI);
+        let (sin, cos) = angle.sin_cos();
+        let reach = radius.ceil() as i64 + 1;
+        for dy in -reach..=reach {
+            for dx in -reach..=reach {
+                let (x, y) = (cx as i64 + dx, cy as i64 + dy);
+                // Wrap horizontally and vertically so the texture still tiles.
+                let (xw, yw) = (x.rem_euclid(w as i64) as u32, y.rem_euclid(h as i64) as u32);
+                let (fx, fy) = (x as f64 + 0.5 - cx, y as f64 + 0.5 - cy);
+                let u = (fx * cos + fy * sin) / radius;
+                let v = (-fx * sin + fy * cos) / (radius * aspect);
+                if u * u + v * v <= 1.0 {
+                    image.put_pixel(xw, yw, Rgba([r, g, b, 255]));
+                }
+            }
         }
-    })
+    }
 }
 
-/// A backdrop: a soft large-scale pattern with fine paper grain (like a textured wall).
+/// Adds fine grain (±`amount` of value) to every texel.
+fn add_grain(image: &mut RgbaImage, amount: f32, rng: &mut Rng) {
+    let grain = ValueNoise::new(256, rng);
+    let (w, h) = image.dimensions();
+    for (x, y, pixel) in image.enumerate_pixels_mut() {
+        let g = 1.0 + amount * (2.0 * grain.sample(x as f32 / w as f32, y as f32 / h as f32) - 1.0);
+        for c in 0..3 {
+            pixel[c] = (pixel[c] as f32 * g).round().clamp(0.0, 255.0) as u8;
+        }
+    }
+}
+
+/// A terrazzo-like floor: stone chips of many sizes and colours on a mottled ground. Every
+/// region looks different, so feature matching (SIFT) finds unambiguous correspondences.
+pub fn floor_texture(size: u32, rng: &mut Rng) -> RgbaImage {
+    let ground = Fbm::new(8, 5, rng);
+    let mut image = fill(size, size, |u, v| {
+        let g = ground.sample(u, v);
+        hsv_to_rgb(32.0 + 10.0 * g, 0.18, 0.45 + 0.25 * g)
+    });
+    let palette = [
+        (25.0, 0.45, 0.55),
+        (40.0, 0.2, 0.8),
+        (0.0, 0.0, 0.25),
+        (200.0, 0.15, 0.6),
+        (15.0, 0.6, 0.4),
+    ];
+    let chips = (size as usize * size as usize) / 180;
+    paint_discs(&mut image, chips, 1.5, 14.0, &palette, rng);
+    add_grain(&mut image, 0.08, rng);
+    image
+}
+
+/// A backdrop like a patterned wall: soft large-scale colour variation with scattered marks
+/// of many sizes, feature-rich but calm behind the plant.
 pub fn backdrop_texture(width: u32, height: u32, rng: &mut Rng) -> RgbaImage {
     let pattern = Fbm::new(6, 5, rng);
-    let grain = ValueNoise::new(128, rng);
-    fill(width, height, |u, v| {
+    let mut image = fill(width, height, |u, v| {
         let p = pattern.sample(u, v);
-        hsv_to_rgb(
-            210.0 + 40.0 * p,
-            0.18 + 0.15 * p,
-            0.55 + 0.3 * p + 0.08 * grain.sample(u, v),
-        )
-    })
+        hsv_to_rgb(210.0 + 40.0 * p, 0.18 + 0.15 * p, 0.55 + 0.3 * p)
+    });
+    let palette = [
+        (220.0, 0.35, 0.45),
+        (30.0, 0.25, 0.85),
+        (260.0, 0.2, 0.7),
+        (190.0, 0.4, 0.3),
+    ];
+    let marks = (width as usize * height as usize) / 300;
+    paint_discs(&mut image, marks, 2.0, 22.0, &palette, rng);
+    add_grain(&mut image, 0.06, rng);
+    image
 }
 
 #[cfg(test)]

@@ -1,0 +1,436 @@
+//! Foreground separation: which points belong to the plant.
+//!
+//! Seed 004 keeps the largest connected component in front of the cameras, which still holds
+//! pot and floor. Here the floor (the dominant plane facing the cameras' up direction, found by
+//! RANSAC), walls (further dominant planes far from the plant) and the background (far from the
+//! plant's vertical axis) are labelled per point; small isolated clusters are outliers. The pot
+//! stays in the foreground and is labelled later from its segments' shape.
+
+use nalgebra::{Matrix3, Point3, Vector3};
+use serde::Serialize;
+
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+
+use super::components::Adjacency;
+use super::knn_pairs;
+use super::points::PointSet;
+use crate::scene::Reconstruction;
+use crate::util::rng::Rng;
+
+/// What a point was found to be before segmentation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PointClass {
+    Plant,
+    /// On a thin tube (stem, petiole, twig): its neighbourhood wraps around an axis.
+    Stem,
+    Floor,
+    Wall,
+    Background,
+    Outlier,
+}
+
+/// A plane `n·x = d` with unit normal.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Plane {
+    pub normal: Vector3<f64>,
+    pub offset: f64,
+}
+
+impl Plane {
+    pub fn signed_distance(&self, p: &Point3<f64>) -> f64 {
+        self.normal.dot(&p.coords) - self.offset
+    }
+
+    /// Least-squares plane through points.
+    fn fit(points: &[Point3<f64>]) -> Option<Self> {
+        let shape = super::shape::Shape::of(points.iter().copied());
+        (shape.count >= 3).then(|| Self {
+            normal: shape.normal(),
+            offset: shape.normal().dot(&shape.centroid.coords),
+        })
+    }
+}
+
+/// Parameters of the separation.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct ForegroundOptions {
+    pub ransac_iterations: usize,
+    /// A plane must hold this fraction of the points to count as floor or wall.
+    pub min_plane_fraction: f64,
+    /// Points beyond this fraction of the cameras' horizontal distance from the plant's axis
+    /// are background.
+    pub max_radius_fraction: f64,
+    /// Connected clusters smaller than this are outliers.
+    pub min_cluster_points: usize,
+    /// Neighbours for the local shape that tells stems from leaves.
+    pub stem_neighbours: usize,
+    /// A point is on a stem when its neighbourhood's thickness `√(λ₃/λ₂)` exceeds this and
+    /// twice the plant's median thickness (which reflects the points' noise).
+    pub min_stem_thickness: f64,
+    pub seed: u64,
+}
+
+impl Default for ForegroundOptions {
+    fn default() -> Self {
+        Self {
+            ransac_iterations: 600,
+            min_plane_fraction: 0.03,
+            max_radius_fraction: 0.6,
+            min_cluster_points: 30,
+            stem_neighbours: 40,
+            min_stem_thickness: 0.3,
+            seed: 1,
+        }
+    }
+}
+
+/// The result: a class per point and the geometry found.
+#[derive(Clone, Debug, Serialize)]
+pub struct Foreground {
+    pub class: Vec<PointClass>,
+    /// Up direction (floor normal when a floor was found, else the cameras' mean up).
+    pub up: Vector3<f64>,
+    pub floor: Option<Plane>,
+    pub walls: Vec<Plane>,
+    /// Point the cameras look at (least-squares intersection of their optical axes).
+    pub plant_center: Point3<f64>,
+    /// Horizontal radius beyond which points are background.
+    pub radius_limit: f64,
+}
+
+/// Why no plant could be found.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ForegroundError {
+    #[error("the model has no registered images")]
+    NoCameras,
+    #[error("the model has no 3D points")]
+    NoPoints,
+    #[error("no plant in front of the cameras: {0}")]
+    NoPlant(String),
+}
+
+/// Least-squares point closest to all lines `(origin, unit direction)`.
+fn closest_point_to_lines(lines: &[(Point3<f64>, Vector3<f64>)]) -> Option<Point3<f64>> {
+    let mut a = Matrix3::zeros();
+    let mut b = Vector3::zeros();
+    for (origin, direction) in lines {
+        let projector = Matrix3::identity() - direction * direction.transpose();
+        a += projector;
+        b += projector * origin.coords;
+    }
+    let solved = a.try_inverse().map(|inv| inv * b)?;
+    solved
+        .iter()
+        .all(|c| c.is_finite())
+        .then(|| Point3::from(solved))
+}
+
+fn median(values: &mut [f64]) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    values.sort_by(f64::total_cmp);
+    values[values.len() / 2]
+}
+
+/// RANSAC for a dominant plane among `candidates`: hypotheses are least-squares planes through
+/// a random point and its 16 nearest neighbours (a hypothesis lands on a plane holding a
+/// fraction p of the points with probability p, not p³ as with random triples), scored on a
+/// subsample by the number of points within `tolerance`; `accept` filters hypotheses (normal
+/// direction, which side the scene lies on).
+fn ransac_plane(
+    points: &[Point3<f64>],
+    candidates: &[usize],
+    tolerance: f64,
+    iterations: usize,
+    accept: impl Fn(&Plane) -> bool,
+    rng: &mut Rng,
+) -> Option<(Plane, Vec<usize>)> {
+    if candidates.len() < 20 {
+        return None;
+    }
+    let coordinates: Vec<[f64; 3]> = candidates
+        .iter()
+        .map(|&i| [points[i].x, points[i].y, points[i].z])
+        .collect();
+    let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&coordinates).ok()?;
+    let neighbours = std::num::NonZero::new(17usize.min(candidates.len()))?;
+    let sample: Vec<usize> = (0..candidates.len().min(6000))
+        .map(|_| candidates[rng.below(candidates.len())])
+        .collect();
+    let mut best: Option<(Plane, usize)> = None;
+    for _ in 0..iterations {
+        let seed = rng.below(candidates.len());
+        let local: Vec<Point3<f64>> = tree
+            .query(&coordinates[seed])
+            .nearest_n::<SquaredEuclidean<f64>>(neighbours)
+            .execute()
+            .iter()
+            .map(|r| points[candidates[r.item as usize]])
+            .collect();
+        let Some(plane) = Plane::fit(&local) else {
+            continue;
+        };
+        if !accept(&plane) {
+            continue;
+        }
+        let inliers = sample
+            .iter()
+            .filter(|&&i| plane.signed_distance(&points[i]).abs() < tolerance)
+            .count();
+        if best.is_none_or(|(_, n)| inliers > n) {
+            best = Some((plane, inliers));
+        }
+    }
+    let (plane, _) = best?;
+    // Refine on all inliers, then recollect them.
+    let inliers: Vec<Point3<f64>> = candidates
+        .iter()
+        .filter(|&&i| plane.signed_distance(&points[i]).abs() < tolerance)
+        .map(|&i| points[i])
+        .collect();
+    let mut refined = Plane::fit(&inliers).unwrap_or(plane);
+    if refined.normal.dot(&plane.normal) < 0.0 {
+        refined.normal = -refined.normal;
+        refined.offset = -refined.offset;
+    }
+    if !accept(&refined) {
+        refined = plane;
+    }
+    let members = candidates
+        .iter()
+        .copied()
+        .filter(|&i| refined.signed_distance(&points[i]).abs() < tolerance)
+        .collect();
+    Some((refined, members))
+}
+
+/// Labels every point (see the module docs).
+pub fn separate_foreground(
+    points: &PointSet,
+    model: &Reconstruction,
+    options: &ForegroundOptions,
+) -> Result<Foreground, ForegroundError> {
+    if points.is_empty() {
+        return Err(ForegroundError::NoPoints);
+    }
+    let images = model.images();
+    if images.is_empty() {
+        return Err(ForegroundError::NoCameras);
+    }
+    let centers: Vec<Point3<f64>> = images.iter().map(|i| i.center_world()).collect();
+    let axes: Vec<(Point3<f64>, Vector3<f64>)> = images
+        .iter()
+        .map(|i| (i.center_world(), i.view_direction_world()))
+        .collect();
+    let mut camera_up = images
+        .iter()
+        .map(|i| i.camera_from_world.rotation.inverse() * -Vector3::y())
+        .sum::<Vector3<f64>>();
+    camera_up = camera_up.try_normalize(1e-9).unwrap_or_else(Vector3::z);
+    let look_at = closest_point_to_lines(&axes).unwrap_or_else(|| {
+        Point3::from(
+            points
+                .positions
+                .iter()
+                .map(|p| p.coords)
+                .sum::<Vector3<f64>>()
+                / points.len() as f64,
+        )
+    });
+    let camera_distance = median(
+        &mut centers
+            .iter()
+            .map(|c| (c - look_at).norm())
+            .collect::<Vec<_>>(),
+    );
+
+    // Scale of the point spacing: median nearest-neighbour distance.
+    let pairs = knn_pairs(points, 1);
+    let spacing = median(
+        &mut pairs
+            .iter()
+            .map(|&(a, b)| (points.positions[a as usize] - points.positions[b as usize]).norm())
+            .collect::<Vec<_>>(),
+    );
+    let tolerance = (3.0 * spacing).max(0.004 * camera_distance);
+    let mut rng = Rng::seed_from(options.seed);
+    let n = points.len();
+    let mut class = vec![PointClass::Plant; n];
+    let min_plane = ((options.min_plane_fraction * n as f64) as usize).max(3);
+    let all: Vec<usize> = (0..n).collect();
+
+    // Floor: the largest plane within 30° of the cameras' up that has the cameras and nearly
+    // all points on one side (a plane through the plant splits its points).
+    let subsample: Vec<usize> = (0..n.min(4000)).map(|_| rng.below(n)).collect();
+    let oriented = |plane: &Plane| {
+        let mut plane = *plane;
+        let camera_side = centers
+            .iter()
+            .map(|c| plane.signed_distance(c))
+            .sum::<f64>();
+        if camera_side < 0.0 {
+            plane.normal = -plane.normal;
+            plane.offset = -plane.offset;
+        }
+        plane
+    };
+    let supports_scene = |plane: &Plane| {
+        let plane = oriented(plane);
+        let below = subsample
+            .iter()
+            .filter(|&&i| plane.signed_distance(&points.positions[i]) < -tolerance)
+            .count();
+        plane.normal.dot(&camera_up) > 30f64.to_radians().cos()
+            && (below as f64) < 0.05 * subsample.len() as f64
+    };
+    let floor = ransac_plane(
+        &points.positions,
+        &all,
+        tolerance,
+        options.ransac_iterations,
+        supports_scene,
+        &mut rng,
+    )
+    .filter(|(_, inliers)| inliers.len() >= min_plane)
+    .map(|(plane, _)| oriented(&plane));
+    tracing::info!(
+        ?floor,
+        ?camera_up,
+        tolerance,
+        spacing,
+        camera_distance,
+        "floor plane"
+    );
+    let up = floor.map_or(camera_up, |f| f.normal);
+    if let Some(floor) = &floor {
+        for (i, p) in points.positions.iter().enumerate() {
+            if floor.signed_distance(p) < tolerance {
+                class[i] = PointClass::Floor;
+            }
+        }
+    }
+
+    // Horizontal distance from the vertical axis through the look-at point.
+    let horizontal = |p: &Point3<f64>| {
+        let d = p - look_at;
+        (d - up * up.dot(&d)).norm()
+    };
+    let camera_radius = median(&mut centers.iter().map(horizontal).collect::<Vec<_>>());
+    let radius_limit = options.max_radius_fraction * camera_radius.max(1e-9);
+    for (i, p) in points.positions.iter().enumerate() {
+        if class[i] == PointClass::Plant && horizontal(p) > radius_limit {
+            class[i] = PointClass::Background;
+        }
+    }
+
+    // Walls: further large planes roughly parallel to up, outside the plant's radius.
+    let mut walls = Vec::new();
+    for _ in 0..3 {
+        let remaining: Vec<usize> = (0..n)
+            .filter(|&i| class[i] == PointClass::Background)
+            .collect();
+        let Some((plane, inliers)) = ransac_plane(
+            &points.positions,
+            &remaining,
+            tolerance,
+            options.ransac_iterations / 2,
+            |plane| plane.normal.dot(&up).abs() < 30f64.to_radians().sin(),
+            &mut rng,
+        ) else {
+            break;
+        };
+        if inliers.len() < min_plane || plane.signed_distance(&look_at).abs() < radius_limit {
+            break;
+        }
+        for i in inliers {
+            class[i] = PointClass::Wall;
+        }
+        walls.push(plane);
+    }
+
+    // Outliers: small clusters of the remaining plant candidates (3D kNN, 3σ links).
+    let candidates: Vec<usize> = (0..n).filter(|&i| class[i] == PointClass::Plant).collect();
+    if candidates.is_empty() {
+        return Err(ForegroundError::NoPlant(format!(
+            "all {n} points are floor, walls or background (radius limit {radius_limit:.3})"
+        )));
+    }
+    let subset = points.subset(&candidates);
+    let links = knn_pairs(&subset, 4);
+    let lengths: Vec<f64> = links
+        .iter()
+        .map(|&(a, b)| (subset.positions[a as usize] - subset.positions[b as usize]).norm())
+        .collect();
+    let sigma = (lengths.iter().map(|l| l * l).sum::<f64>() / lengths.len().max(1) as f64).sqrt();
+    let adjacency = Adjacency::from_edges(
+        subset.len(),
+        links
+            .iter()
+            .zip(&lengths)
+            .filter(|(_, l)| **l < 3.0 * sigma)
+            .map(|(&(a, b), _)| (a, b, 1.0)),
+    );
+    let components = adjacency.components();
+    let groups = components.groups();
+    for group in &groups {
+        if group.len() < options.min_cluster_points {
+            for &local in group {
+                class[candidates[local as usize]] = PointClass::Outlier;
+            }
+        }
+    }
+    if !class.contains(&PointClass::Plant) {
+        return Err(ForegroundError::NoPlant(
+            "only small isolated clusters remain near the cameras' focus".into(),
+        ));
+    }
+
+    // Stems: points whose neighbourhood wraps around a thin tube.
+    let plant: Vec<usize> = (0..n).filter(|&i| class[i] == PointClass::Plant).collect();
+    let shapes = super::local_shape::local_shapes(&points.subset(&plant), options.stem_neighbours);
+    let median_thickness = median(&mut shapes.iter().map(|s| s.thickness).collect::<Vec<_>>());
+    let stem_threshold = options.min_stem_thickness.max(2.0 * median_thickness);
+    for (local, shape) in shapes.iter().enumerate() {
+        if shape.thickness > stem_threshold {
+            class[plant[local]] = PointClass::Stem;
+        }
+    }
+    Ok(Foreground {
+        class,
+        up,
+        floor,
+        walls,
+        plant_center: look_at,
+        radius_limit,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn closest_point_of_lines_through_a_common_point() {
+        let target = Point3::new(1.0, 2.0, 3.0);
+        let lines: Vec<(Point3<f64>, Vector3<f64>)> = [
+            Vector3::new(1.0, 0.0, 0.0),
+            Vector3::new(0.0, 1.0, 0.2),
+            Vector3::new(-0.5, 0.5, 1.0),
+        ]
+        .iter()
+        .map(|d| {
+            let d = d.normalize();
+            (target - d * 4.0, d)
+        })
+        .collect();
+        let found = closest_point_to_lines(&lines).unwrap();
+        assert!((found - target).norm() < 1e-9);
+        let parallel = vec![
+            (Point3::origin(), Vector3::x()),
+            (Point3::new(0.0, 1.0, 0.0), Vector3::x()),
+        ];
+        assert!(closest_point_to_lines(&parallel).is_none());
+    }
+}

@@ -1,0 +1,314 @@
+//! Recursive two-way normalized cuts (Shi & Malik 2000) inside each component of the threshold
+//! partition (seed 004 §5.1).
+//!
+//! A group is split at the sweep cut of its Fiedler vector with the lowest
+//! `Ncut(A, B) = cut/vol(A) + cut/vol(B)`. The split is kept only when it separates real parts:
+//! - a *boundary*: the cut edges are much weaker than the group's edges on average (the
+//!   image term says a colour edge lies between the two sides), or
+//! - a *bottleneck*: few edges cross compared with splitting a surface of that size in two
+//!   (a petiole or stem junction), or
+//! - a *shape* gain: the group is not flat enough to be one leaf and both sides are flatter.
+//!
+//! Groups smaller than twice the minimum segment are not split.
+
+use serde::Serialize;
+
+use super::components::Adjacency;
+use super::lanczos::{LanczosOptions, fiedler_vector};
+use super::shape::Shape;
+use nalgebra::Point3;
+
+/// Stop criteria of the recursion.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct NcutOptions {
+    /// Smallest segment worth keeping (points).
+    pub min_segment_points: usize,
+    /// Never keep a split whose Ncut value exceeds this.
+    pub max_ncut: f64,
+    /// Boundary: mean cut-edge weight ≤ this × mean edge weight of the group.
+    pub boundary_ratio: f64,
+    /// Bottleneck: cut edges ≤ this × √(points on the smaller side).
+    pub bottleneck: f64,
+    /// Sheet residual (see [`Shape::sheet_residual`]) above which a group is not one smooth
+    /// surface and so not a single leaf.
+    pub max_sheet_residual: f64,
+}
+
+impl Default for NcutOptions {
+    fn default() -> Self {
+        Self {
+            min_segment_points: 20,
+            max_ncut: 0.5,
+            boundary_ratio: 0.3,
+            bottleneck: 0.35,
+            max_sheet_residual: 0.02,
+        }
+    }
+}
+
+/// A candidate split of a group.
+#[derive(Clone, Debug)]
+pub struct Split {
+    /// `true` for the nodes on side A.
+    pub side: Vec<bool>,
+    pub ncut: f64,
+    pub cut_weight: f64,
+    pub cut_edges: usize,
+    pub smaller_side: usize,
+}
+
+/// Why a group was split or left whole (for reports and tuning).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SplitReason {
+    Boundary,
+    Bottleneck,
+    Shape,
+}
+
+/// The sweep cut of `order` (nodes sorted by Fiedler value) with the lowest Ncut, both sides
+/// having at least `min_side` nodes.
+pub fn best_sweep_split(adjacency: &Adjacency, values: &[f64], min_side: usize) -> Option<Split> {
+    let n = adjacency.num_nodes();
+    if n < 2 * min_side.max(1) {
+        return None;
+    }
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| values[a].total_cmp(&values[b]));
+    let degrees = adjacency.degrees();
+    let total: f64 = degrees.iter().sum();
+    let mut in_a = vec![false; n];
+    let mut volume_a = 0.0;
+    let mut cut = 0.0;
+    let mut cut_edges: isize = 0;
+    let mut best: Option<(f64, usize, f64, isize)> = None;
+    for (k, &node) in order.iter().enumerate().take(n - 1) {
+        in_a[node] = true;
+        volume_a += degrees[node];
+        for (j, w) in adjacency.row(node) {
+            if in_a[j] {
+                cut -= w;
+                cut_edges -= 1;
+            } else {
+                cut += w;
+                cut_edges += 1;
+            }
+        }
+        let size_a = k + 1;
+        if size_a < min_side || n - size_a < min_side {
+            continue;
+        }
+        let volume_b = total - volume_a;
+        if volume_a <= 0.0 || volume_b <= 0.0 {
+            continue;
+        }
+        let ncut = cut.max(0.0) / volume_a + cut.max(0.0) / volume_b;
+        if best.is_none_or(|b| ncut < b.0) {
+            best = Some((ncut, size_a, cut.max(0.0), cut_edges));
+        }
+    }
+    let (ncut, size_a, cut_weight, cut_edges) = best?;
+    let mut side = vec![false; n];
+    for &node in &order[..size_a] {
+        side[node] = true;
+    }
+    Some(Split {
+        side,
+        ncut,
+        cut_weight,
+        cut_edges: cut_edges.max(0) as usize,
+        smaller_side: size_a.min(n - size_a),
+    })
+}
+
+/// Decides whether a split separates real parts (see the module docs).
+pub fn judge_split(
+    adjacency: &Adjacency,
+    split: &Split,
+    positions: &[Point3<f64>],
+    options: &NcutOptions,
+) -> Option<SplitReason> {
+    if split.ncut > options.max_ncut {
+        return None;
+    }
+    let edge_count = adjacency.neighbours.len() / 2;
+    let mean_weight = adjacency.weights.iter().sum::<f64>() / 2.0 / edge_count.max(1) as f64;
+    let mean_cut = split.cut_weight / split.cut_edges.max(1) as f64;
+    if split.cut_edges == 0 || mean_cut <= options.boundary_ratio * mean_weight {
+        return Some(SplitReason::Boundary);
+    }
+    if (split.cut_edges as f64) <= options.bottleneck * (split.smaller_side as f64).sqrt() {
+        return Some(SplitReason::Bottleneck);
+    }
+    let residual = |points: &mut dyn Iterator<Item = Point3<f64>>| {
+        let points: Vec<Point3<f64>> = points.collect();
+        Shape::of(points.iter().copied()).sheet_residual(points.iter().copied())
+    };
+    let whole = residual(&mut positions.iter().copied());
+    if whole > options.max_sheet_residual {
+        let side = |a: bool| {
+            positions
+                .iter()
+                .zip(&split.side)
+                .filter(move |(_, s)| **s == a)
+                .map(|(p, _)| *p)
+        };
+        let (ra, rb) = (residual(&mut side(true)), residual(&mut side(false)));
+        if ra < whole && rb < whole {
+            return Some(SplitReason::Shape);
+        }
+    }
+    None
+}
+
+/// Statistics of a recursion, for reports.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct NcutStats {
+    pub eigen_solves: usize,
+    pub splits_boundary: usize,
+    pub splits_bottleneck: usize,
+    pub splits_shape: usize,
+    pub rejected_splits: usize,
+}
+
+/// Splits every group recursively. `adjacency` is the whole graph (global node ids),
+/// `positions` the node positions. Returns the final groups (global ids) and statistics.
+pub fn recursive_ncut(
+    adjacency: &Adjacency,
+    groups: Vec<Vec<u32>>,
+    positions: &[Point3<f64>],
+    options: &NcutOptions,
+) -> (Vec<Vec<u32>>, NcutStats) {
+    let mut stats = NcutStats::default();
+    let mut done = Vec::new();
+    let mut queue = groups;
+    let lanczos = LanczosOptions::default();
+    while let Some(group) = queue.pop() {
+        if group.len() < 2 * options.min_segment_points {
+            done.push(group);
+            continue;
+        }
+        let sub = adjacency.induced(&group);
+        // A group may have fallen apart after a split: handle each piece on its own.
+        let components = sub.components();
+        if components.count > 1 {
+            for piece in components.groups() {
+                queue.push(piece.iter().map(|&i| group[i as usize]).collect());
+            }
+            continue;
+        }
+        stats.eigen_solves += 1;
+        let Some((_, fiedler)) = fiedler_vector(&sub, &lanczos) else {
+            done.push(group);
+            continue;
+        };
+        let Some(split) = best_sweep_split(&sub, &fiedler, options.min_segment_points) else {
+            done.push(group);
+            continue;
+        };
+        let local_positions: Vec<Point3<f64>> =
+            group.iter().map(|&g| positions[g as usize]).collect();
+        match judge_split(&sub, &split, &local_positions, options) {
+            Some(reason) => {
+                match reason {
+                    SplitReason::Boundary => stats.splits_boundary += 1,
+                    SplitReason::Bottleneck => stats.splits_bottleneck += 1,
+                    SplitReason::Shape => stats.splits_shape += 1,
+                }
+                let mut a = Vec::new();
+                let mut b = Vec::new();
+                for (i, &g) in group.iter().enumerate() {
+                    if split.side[i] {
+                        a.push(g);
+                    } else {
+                        b.push(g);
+                    }
+                }
+                queue.push(a);
+                queue.push(b);
+            }
+            None => {
+                stats.rejected_splits += 1;
+                done.push(group);
+            }
+        }
+    }
+    done.sort_by_key(|g| g.iter().copied().min());
+    (done, stats)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two square grids of points side by side, joined along their touching edge by edges of
+    /// weight `joint` (1 inside each grid).
+    fn two_patches(side: usize, joint: f64) -> (Adjacency, Vec<Point3<f64>>) {
+        let mut edges = Vec::new();
+        let mut positions = Vec::new();
+        let index = |patch: usize, i: usize, j: usize| (patch * side * side + i * side + j) as u32;
+        for patch in 0..2 {
+            for i in 0..side {
+                for j in 0..side {
+                    positions.push(Point3::new((patch * side + j) as f64, i as f64, 0.0));
+                    if j + 1 < side {
+                        edges.push((index(patch, i, j), index(patch, i, j + 1), 1.0));
+                    }
+                    if i + 1 < side {
+                        edges.push((index(patch, i, j), index(patch, i + 1, j), 1.0));
+                    }
+                }
+            }
+        }
+        for i in 0..side {
+            edges.push((index(0, i, side - 1), index(1, i, 0), joint));
+        }
+        (
+            Adjacency::from_edges(2 * side * side, edges.into_iter()),
+            positions,
+        )
+    }
+
+    #[test]
+    fn weak_boundary_is_split_and_a_uniform_patch_is_not() {
+        let (adjacency, positions) = two_patches(12, 0.05);
+        let all: Vec<u32> = (0..adjacency.num_nodes() as u32).collect();
+        let (groups, stats) =
+            recursive_ncut(&adjacency, vec![all], &positions, &NcutOptions::default());
+        assert_eq!(groups.len(), 2, "{stats:?}");
+        assert_eq!(stats.splits_boundary, 1);
+        for g in &groups {
+            assert_eq!(g.len(), 144);
+            let first = positions[g[0] as usize].x < 12.0;
+            assert!(g.iter().all(|&i| (positions[i as usize].x < 12.0) == first));
+        }
+        // Joined as strongly as inside: one flat patch, kept whole.
+        let (adjacency, positions) = two_patches(12, 1.0);
+        let all: Vec<u32> = (0..adjacency.num_nodes() as u32).collect();
+        let (groups, _) =
+            recursive_ncut(&adjacency, vec![all], &positions, &NcutOptions::default());
+        assert_eq!(groups.len(), 1);
+    }
+
+    #[test]
+    fn narrow_bridge_is_a_bottleneck() {
+        let (adjacency, positions) = two_patches(14, 1.0);
+        // Keep only one of the joining edges at full weight.
+        let side = 14;
+        let mut edges = Vec::new();
+        for i in 0..adjacency.num_nodes() {
+            for (j, w) in adjacency.row(i) {
+                let crossing = (i < side * side) != (j < side * side);
+                if i < j && (!crossing || i == side - 1) {
+                    edges.push((i as u32, j as u32, w));
+                }
+            }
+        }
+        let bridged = Adjacency::from_edges(adjacency.num_nodes(), edges.into_iter());
+        let all: Vec<u32> = (0..bridged.num_nodes() as u32).collect();
+        let (groups, stats) =
+            recursive_ncut(&bridged, vec![all], &positions, &NcutOptions::default());
+        assert_eq!(groups.len(), 2, "{stats:?}");
+        assert_eq!(stats.splits_bottleneck, 1);
+    }
+}

@@ -1,0 +1,508 @@
+//! The automatic leaf segmentation (seed 004 §5.1): foreground → kNN graph with joint 3D/2D
+//! weights → threshold partition → recursive normalized cut → leaf / stem / pot / other labels,
+//! and the `segmentation.ply` + `segments.json` outputs.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::Instant;
+
+use nalgebra::Point3;
+use rayon::prelude::*;
+use serde::Serialize;
+
+use super::components::Adjacency;
+use super::foreground::{
+    Foreground, ForegroundError, ForegroundOptions, PointClass, separate_foreground,
+};
+use super::gradient::GradientImage;
+use super::ncut::{NcutOptions, NcutStats, recursive_ncut};
+use super::points::PointSet;
+use super::shape::Shape;
+use super::{GraphOptions, PointGraph, ViewData};
+use crate::model::{segmentation_ply, write_segmentation_ply};
+use crate::scene::{Scene, SceneError};
+use crate::util::atomic::write_atomic;
+use crate::util::progress::Progress;
+
+/// All parameters of the automatic segmentation.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct SegmentOptions {
+    pub graph: GraphOptions,
+    pub ncut: NcutOptions,
+    pub foreground: ForegroundOptions,
+}
+
+/// What a segment is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SegmentLabel {
+    Leaf,
+    Stem,
+    Pot,
+    Other,
+}
+
+/// A segment of the plant's points.
+#[derive(Clone, Debug, Serialize)]
+pub struct Segment {
+    pub id: u32,
+    pub label: SegmentLabel,
+    /// Leaf number for leaf segments (the `leaf_id` written to segmentation.ply).
+    pub leaf_id: Option<u32>,
+    /// Indices into the point set.
+    #[serde(skip)]
+    pub points: Vec<u32>,
+    pub num_points: usize,
+    pub shape: Shape,
+}
+
+/// Segmentation failures.
+#[derive(Debug, thiserror::Error)]
+pub enum SegmentError {
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error(transparent)]
+    Foreground(#[from] ForegroundError),
+    #[error("the model's {0} points have no tracks: nothing ties them to the images")]
+    NoTracks(usize),
+    #[error(
+        "the image term (alpha = {alpha}) needs the photos, but no view has its image file (images folder: {folder}); run with --alpha 0 to use 3D distances only"
+    )]
+    NoImages { alpha: f64, folder: String },
+    #[error("{path}: {message}")]
+    Output { path: String, message: String },
+}
+
+/// Seconds per stage.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct SegmentTimings {
+    pub foreground: f64,
+    pub gradients: f64,
+    pub graph: f64,
+    pub partition: f64,
+    pub total: f64,
+}
+
+/// The result of the automatic segmentation.
+#[derive(Clone, Debug, Serialize)]
+pub struct Segmentation {
+    #[serde(skip)]
+    pub points: PointSet,
+    #[serde(skip)]
+    pub foreground: Foreground,
+    /// Segment index per point (`None` for points outside the plant or in no segment).
+    #[serde(skip)]
+    pub point_segment: Vec<Option<u32>>,
+    pub segments: Vec<Segment>,
+    pub sigma_3d: f64,
+    pub sigma_2d: f64,
+    pub edges_total: usize,
+    pub edges_kept: usize,
+    pub edges_dropped_not_covisible: usize,
+    pub threshold_components: usize,
+    /// Segments joined by region merging (see `merge_sheets`).
+    pub sheet_merges: usize,
+    pub views_with_images: usize,
+    pub ncut: NcutStats,
+    pub timings: SegmentTimings,
+    pub options: SegmentOptions,
+}
+
+impl Segmentation {
+    /// `leaf_id` per point (−1 when the point is not on a leaf segment).
+    pub fn leaf_ids(&self) -> Vec<i64> {
+        self.point_segment
+            .iter()
+            .map(|s| {
+                s.and_then(|s| self.segments[s as usize].leaf_id)
+                    .map_or(-1, |l| l as i64)
+            })
+            .collect()
+    }
+
+    /// Number of points per foreground class.
+    pub fn class_counts(&self) -> BTreeMap<String, usize> {
+        let mut counts = BTreeMap::new();
+        for c in &self.foreground.class {
+            let name = serde_json::to_value(c)
+                .ok()
+                .and_then(|v| v.as_str().map(str::to_owned))
+                .unwrap_or_default();
+            *counts.entry(name).or_insert(0) += 1;
+        }
+        counts
+    }
+
+    pub fn num_leaves(&self) -> usize {
+        self.segments
+            .iter()
+            .filter(|s| s.label == SegmentLabel::Leaf)
+            .count()
+    }
+}
+
+/// Computes gradient images for every view whose image file exists (in parallel).
+fn gradient_images(scene: &Scene, progress: &dyn Progress) -> Vec<Option<GradientImage>> {
+    let images = scene.reconstruction.images();
+    progress.stage("gradient images", images.len() as u64);
+    images
+        .par_iter()
+        .map(|image| {
+            let result = GradientImage::for_image(scene, image);
+            progress.advance(1);
+            match result {
+                Ok(g) => Some(g),
+                Err(e) => {
+                    tracing::warn!("view {} skipped for the image term: {e}", image.name);
+                    None
+                }
+            }
+        })
+        .collect()
+}
+
+/// Attaches segments smaller than the minimum to the neighbouring segment they share the most
+/// kNN edges with (edges within the 3D threshold); the rest stay unassigned.
+fn absorb_fragments(
+    groups: Vec<Vec<u32>>,
+    graph: &PointGraph,
+    min_points: usize,
+) -> (Vec<Vec<u32>>, Vec<Option<u32>>) {
+    let n = graph.num_nodes;
+    let mut owner: Vec<Option<u32>> = vec![None; n];
+    let (large, small): (Vec<Vec<u32>>, Vec<Vec<u32>>) =
+        groups.into_iter().partition(|g| g.len() >= min_points);
+    for (s, group) in large.iter().enumerate() {
+        for &node in group {
+            owner[node as usize] = Some(s as u32);
+        }
+    }
+    let limit = (graph.options.k * graph.sigma_3d) as f32;
+    let spatial = Adjacency::from_edges(
+        n,
+        graph
+            .edges
+            .iter()
+            .filter(|e| e.d3d < limit)
+            .map(|e| (e.a, e.b, 1.0)),
+    );
+    let mut groups = large;
+    // Repeat so that fragments touching fragments can reach a large segment.
+    let mut pending = small;
+    for _ in 0..3 {
+        let mut still = Vec::new();
+        for fragment in pending {
+            let mut votes: BTreeMap<u32, usize> = BTreeMap::new();
+            for &node in &fragment {
+                for (j, _) in spatial.row(node as usize) {
+                    if let Some(s) = owner[j] {
+                        *votes.entry(s).or_insert(0) += 1;
+                    }
+                }
+            }
+            match votes
+                .into_iter()
+                .max_by_key(|&(s, v)| (v, std::cmp::Reverse(s)))
+            {
+                Some((s, _)) => {
+                    for &node in &fragment {
+                        owner[node as usize] = Some(s);
+                    }
+                    groups[s as usize].extend_from_slice(&fragment);
+                }
+                None => still.push(fragment),
+            }
+        }
+        pending = still;
+    }
+    (groups, owner)
+}
+
+/// Region merging after the cuts: two segments are joined when they share a long border in
+/// the kNN graph (contact edges within the 3D threshold ≥ `min_contact` × √(smaller size)) and
+/// their union is still one smooth sheet. This repairs leaves whose rim or a vein was cut off by
+/// the 2D threshold, without joining different leaves (which touch along short borders, or
+/// whose union is not one sheet).
+fn merge_sheets(
+    mut groups: Vec<Vec<u32>>,
+    graph: &PointGraph,
+    positions: &[Point3<f64>],
+    options: &NcutOptions,
+    min_contact: f64,
+) -> (Vec<Vec<u32>>, usize) {
+    let limit = (graph.options.k * graph.sigma_3d) as f32;
+    let mut merges = 0;
+    loop {
+        let mut owner = vec![usize::MAX; graph.num_nodes];
+        for (g, group) in groups.iter().enumerate() {
+            for &node in group {
+                owner[node as usize] = g;
+            }
+        }
+        let mut contact: BTreeMap<(usize, usize), usize> = BTreeMap::new();
+        for e in graph.edges.iter().filter(|e| e.d3d < limit) {
+            let (a, b) = (owner[e.a as usize], owner[e.b as usize]);
+            if a != b && a != usize::MAX && b != usize::MAX {
+                *contact.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+            }
+        }
+        let sheet = |nodes: &mut dyn Iterator<Item = u32>| {
+            let points: Vec<Point3<f64>> = nodes.map(|n| positions[n as usize]).collect();
+            Shape::of(points.iter().copied()).sheet_residual(points.iter().copied())
+        };
+        let mut candidates: Vec<(f64, usize, usize)> = contact
+            .iter()
+            .filter_map(|(&(a, b), &count)| {
+                let smaller = groups[a].len().min(groups[b].len()) as f64;
+                let ratio = count as f64 / smaller.sqrt();
+                (ratio >= min_contact).then_some((ratio, a, b))
+            })
+            .collect();
+        candidates.sort_by(|x, y| y.0.total_cmp(&x.0).then(x.1.cmp(&y.1)).then(x.2.cmp(&y.2)));
+        let mut merged = vec![false; groups.len()];
+        let mut any = false;
+        for (_, a, b) in candidates {
+            if merged[a] || merged[b] {
+                continue;
+            }
+            let union = sheet(&mut groups[a].iter().chain(&groups[b]).copied());
+            if union <= options.max_sheet_residual {
+                let taken = std::mem::take(&mut groups[b]);
+                groups[a].extend(taken);
+                merged[a] = true;
+                merged[b] = true;
+                merges += 1;
+                any = true;
+            }
+        }
+        groups.retain(|g| !g.is_empty());
+        if !any {
+            return (groups, merges);
+        }
+    }
+}
+
+/// Labels a segment from its shape and place: a *stem* is long and thin; the *pot* is a low
+/// surface of revolution about the plant's vertical axis (nearly constant distance from it);
+/// a *leaf* is one smooth sheet; anything else is *other*.
+fn classify(
+    shape: &Shape,
+    points: &[Point3<f64>],
+    foreground: &Foreground,
+    plant_height: f64,
+    options: &NcutOptions,
+) -> SegmentLabel {
+    if shape.count < options.min_segment_points {
+        return SegmentLabel::Other;
+    }
+    if shape.width_ratio() < 0.15 {
+        return SegmentLabel::Stem;
+    }
+    let up = foreground.up;
+    let height = |p: &Point3<f64>| match &foreground.floor {
+        Some(floor) => floor.signed_distance(p),
+        None => up.dot(&(p - foreground.plant_center)),
+    };
+    let radial: Vec<f64> = points
+        .iter()
+        .map(|p| {
+            let d = p - foreground.plant_center;
+            (d - up * up.dot(&d)).norm()
+        })
+        .collect();
+    let mean_radius = radial.iter().sum::<f64>() / radial.len() as f64;
+    let spread = (radial
+        .iter()
+        .map(|r| (r - mean_radius).powi(2))
+        .sum::<f64>()
+        / radial.len() as f64)
+        .sqrt();
+    if height(&shape.centroid) < 0.35 * plant_height && spread < 0.1 * mean_radius {
+        return SegmentLabel::Pot;
+    }
+    if shape.sheet_residual(points.iter().copied()) <= options.max_sheet_residual {
+        return SegmentLabel::Leaf;
+    }
+    SegmentLabel::Other
+}
+
+/// Runs the automatic segmentation on a scene's points.
+pub fn segment_scene(
+    scene: &Scene,
+    options: &SegmentOptions,
+    progress: &dyn Progress,
+) -> Result<Segmentation, SegmentError> {
+    let start = Instant::now();
+    let mut timings = SegmentTimings::default();
+    let points = PointSet::from_scene(scene);
+    if points.is_empty() {
+        return Err(ForegroundError::NoPoints.into());
+    }
+    let with_tracks = points.views.iter().filter(|v| !v.is_empty()).count();
+    if with_tracks == 0 {
+        return Err(SegmentError::NoTracks(points.len()));
+    }
+    progress.stage("foreground", 0);
+    let clock = Instant::now();
+    let mut foreground = separate_foreground(&points, &scene.reconstruction, &options.foreground)?;
+    for (i, views) in points.views.iter().enumerate() {
+        if views.is_empty() {
+            foreground.class[i] = PointClass::Outlier;
+        }
+    }
+    timings.foreground = clock.elapsed().as_secs_f64();
+
+    let clock = Instant::now();
+    let gradients = if options.graph.alpha > 0.0 {
+        let gradients = gradient_images(scene, progress);
+        if gradients.iter().all(Option::is_none) {
+            return Err(SegmentError::NoImages {
+                alpha: options.graph.alpha,
+                folder: scene
+                    .source
+                    .images_dir
+                    .as_ref()
+                    .map_or_else(|| "none found".to_owned(), |p| p.display().to_string()),
+            });
+        }
+        gradients
+    } else {
+        Vec::new()
+    };
+    let views_with_images = gradients.iter().filter(|g| g.is_some()).count();
+    timings.gradients = clock.elapsed().as_secs_f64();
+
+    progress.stage("graph", 0);
+    let clock = Instant::now();
+    // Leaves are segmented among the non-stem plant points.
+    let plant: Vec<usize> = (0..points.len())
+        .filter(|&i| foreground.class[i] == PointClass::Plant)
+        .collect();
+    let plant_points = points.subset(&plant);
+    let model = &scene.reconstruction;
+    let views: Vec<ViewData> = model
+        .images()
+        .iter()
+        .enumerate()
+        .map(|(v, image)| ViewData {
+            camera: model.camera_of(image),
+            camera_from_world: image.camera_from_world,
+            gradient: gradients.get(v).and_then(Option::as_ref),
+        })
+        .collect();
+    let graph = PointGraph::build(&plant_points, &views, options.graph);
+    timings.graph = clock.elapsed().as_secs_f64();
+
+    progress.stage("normalized cuts", 0);
+    let clock = Instant::now();
+    let adjacency = graph.adjacency();
+    let components = adjacency.components();
+    let (groups, ncut_stats) = recursive_ncut(
+        &adjacency,
+        components.groups(),
+        &plant_points.positions,
+        &options.ncut,
+    );
+    let (groups, _) = absorb_fragments(groups, &graph, options.ncut.min_segment_points);
+    let (groups, sheet_merges) =
+        merge_sheets(groups, &graph, &plant_points.positions, &options.ncut, 1.0);
+    let mut owner: Vec<Option<u32>> = vec![None; plant_points.len()];
+    for (s, group) in groups.iter().enumerate() {
+        for &node in group {
+            owner[node as usize] = Some(s as u32);
+        }
+    }
+
+    // Plant height above the floor (robust top), for pot detection.
+    let mut heights: Vec<f64> = plant_points
+        .positions
+        .iter()
+        .map(|p| match &foreground.floor {
+            Some(floor) => floor.signed_distance(p),
+            None => foreground.up.dot(&(p - foreground.plant_center)),
+        })
+        .collect();
+    heights.sort_by(f64::total_cmp);
+    let plant_height = heights
+        .get((heights.len() as f64 * 0.98) as usize)
+        .copied()
+        .unwrap_or(0.0)
+        .max(1e-9);
+
+    let mut segments = Vec::with_capacity(groups.len());
+    let mut next_leaf = 0u32;
+    for (id, group) in groups.iter().enumerate() {
+        let positions: Vec<Point3<f64>> = group
+            .iter()
+            .map(|&i| plant_points.positions[i as usize])
+            .collect();
+        let shape = Shape::of(positions.iter().copied());
+        let label = classify(&shape, &positions, &foreground, plant_height, &options.ncut);
+        let leaf_id = (label == SegmentLabel::Leaf).then(|| {
+            next_leaf += 1;
+            next_leaf - 1
+        });
+        segments.push(Segment {
+            id: id as u32,
+            label,
+            leaf_id,
+            points: group.iter().map(|&i| plant[i as usize] as u32).collect(),
+            num_points: group.len(),
+            shape,
+        });
+    }
+    let mut point_segment = vec![None; points.len()];
+    for (local, s) in owner.iter().enumerate() {
+        point_segment[plant[local]] = *s;
+    }
+    timings.partition = clock.elapsed().as_secs_f64();
+    timings.total = start.elapsed().as_secs_f64();
+    Ok(Segmentation {
+        points,
+        foreground,
+        point_segment,
+        segments,
+        sigma_3d: graph.sigma_3d,
+        sigma_2d: graph.sigma_2d,
+        edges_total: graph.edges.len(),
+        edges_kept: graph.edges.iter().filter(|e| e.weight > 0.0).count(),
+        edges_dropped_not_covisible: graph.dropped_not_covisible,
+        threshold_components: components.count,
+        sheet_merges,
+        views_with_images,
+        ncut: ncut_stats,
+        timings,
+        options: *options,
+    })
+}
+
+/// Writes `segmentation.ply` (every input point with its `leaf_id`) and `segments.json`.
+pub fn write_segmentation(out: &Path, segmentation: &Segmentation) -> Result<(), SegmentError> {
+    let output_error = |path: &Path, e: &dyn std::fmt::Display| SegmentError::Output {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    };
+    std::fs::create_dir_all(out).map_err(|e| output_error(out, &e))?;
+    let points = &segmentation.points;
+    let ply = segmentation_ply(
+        &points.positions,
+        &points.colors,
+        &points.point_ids,
+        &segmentation.leaf_ids(),
+    );
+    let ply_path = out.join("segmentation.ply");
+    write_segmentation_ply(&ply_path, &ply).map_err(|e| output_error(&ply_path, &e))?;
+    let json = serde_json::json!({
+        "format": "frond segments 1",
+        "points": points.len(),
+        "leaves": segmentation.num_leaves(),
+        "foreground": segmentation.class_counts(),
+        "floor": segmentation.foreground.floor,
+        "up": segmentation.foreground.up,
+        "plant_center": segmentation.foreground.plant_center,
+        "summary": segmentation,
+    });
+    let json_path = out.join("segments.json");
+    let text = serde_json::to_string_pretty(&json).map_err(|e| output_error(&json_path, &e))?;
+    write_atomic(&json_path, text.as_bytes()).map_err(|e| output_error(&json_path, &e))
+}

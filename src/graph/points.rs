@@ -1,0 +1,127 @@
+//! The point set the segmentation works on: positions, colours and the views that see each
+//! point, taken from a COLMAP model's points (sparse or semi-dense) or from fused dense points.
+
+use nalgebra::Point3;
+
+use crate::scene::{Reconstruction, Scene};
+
+/// Points with visibility, indexed 0..n. View indices refer to `Reconstruction::images()`.
+#[derive(Clone, Debug, Default)]
+pub struct PointSet {
+    pub positions: Vec<Point3<f64>>,
+    pub colors: Vec<[u8; 3]>,
+    /// Sorted, deduplicated view indices per point.
+    pub views: Vec<Vec<u32>>,
+    /// COLMAP point ids (sparse input) or positions in fused.ply (dense input).
+    pub point_ids: Vec<u64>,
+}
+
+impl PointSet {
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+
+    /// The model's 3D points with their tracks' images.
+    pub fn from_reconstruction(model: &Reconstruction) -> Self {
+        let mut set = PointSet::default();
+        for point in model.points() {
+            let mut views: Vec<u32> = point
+                .track
+                .iter()
+                .filter_map(|t| model.image_position(t.image_id).map(|i| i as u32))
+                .collect();
+            views.sort_unstable();
+            views.dedup();
+            set.positions.push(point.position_world);
+            set.colors.push(point.color);
+            set.views.push(views);
+            set.point_ids.push(point.id);
+        }
+        set
+    }
+
+    /// Dense points when the scene has them (with visibility), else the model's points.
+    pub fn from_scene(scene: &Scene) -> Self {
+        let Some(dense) = scene.dense.as_ref().filter(|d| !d.visible_in.is_empty()) else {
+            return Self::from_reconstruction(&scene.reconstruction);
+        };
+        let model = &scene.reconstruction;
+        let mut set = PointSet::default();
+        for (i, p) in dense.positions_world.iter().enumerate() {
+            let mut views: Vec<u32> = dense.visible_in[i]
+                .iter()
+                .filter_map(|id| model.image_position(*id).map(|v| v as u32))
+                .collect();
+            views.sort_unstable();
+            views.dedup();
+            set.positions.push(p.cast::<f64>());
+            set.colors.push(dense.colors[i]);
+            set.views.push(views);
+            set.point_ids.push(i as u64);
+        }
+        set
+    }
+
+    /// A subset in the given order.
+    pub fn subset(&self, indices: &[usize]) -> Self {
+        Self {
+            positions: indices.iter().map(|&i| self.positions[i]).collect(),
+            colors: indices.iter().map(|&i| self.colors[i]).collect(),
+            views: indices.iter().map(|&i| self.views[i].clone()).collect(),
+            point_ids: indices.iter().map(|&i| self.point_ids[i]).collect(),
+        }
+    }
+}
+
+/// Views seen by both sorted lists (merge intersection).
+pub fn common_views(a: &[u32], b: &[u32], out: &mut Vec<u32>) {
+    out.clear();
+    let (mut i, mut j) = (0, 0);
+    while i < a.len() && j < b.len() {
+        match a[i].cmp(&b[j]) {
+            std::cmp::Ordering::Less => i += 1,
+            std::cmp::Ordering::Greater => j += 1,
+            std::cmp::Ordering::Equal => {
+                out.push(a[i]);
+                i += 1;
+                j += 1;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn intersection_of_sorted_views() {
+        let mut out = Vec::new();
+        common_views(&[1, 3, 5, 9], &[2, 3, 9, 10], &mut out);
+        assert_eq!(out, vec![3, 9]);
+        common_views(&[], &[1], &mut out);
+        assert!(out.is_empty());
+    }
+
+    #[test]
+    fn from_reconstruction_maps_tracks_to_view_positions() {
+        let model =
+            crate::scene::synthetic::generate(&crate::scene::synthetic::SyntheticModelSpec {
+                num_points: 50,
+                ..Default::default()
+            });
+        let set = PointSet::from_reconstruction(&model);
+        assert_eq!(set.len(), 50);
+        for (i, p) in model.points().iter().enumerate() {
+            assert_eq!(set.views[i].len(), p.track.len());
+            for &v in &set.views[i] {
+                let image = &model.images()[v as usize];
+                assert!(p.track.iter().any(|t| t.image_id == image.id));
+            }
+        }
+    }
+}

@@ -1,0 +1,144 @@
+//! Shape descriptors of point groups from their principal components (seed 004 §6.2 uses the
+//! same PCA for the flat leaf fit): centroid, axes, and how planar or linear the group is.
+
+use nalgebra::{Matrix3, Point3, SymmetricEigen, Vector3};
+use serde::Serialize;
+
+/// Principal-component shape of a point group.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Shape {
+    pub count: usize,
+    pub centroid: Point3<f64>,
+    /// Eigenvalues of the covariance, largest first.
+    pub eigenvalues: [f64; 3],
+    /// Matching unit axes; `axes[2]` is the normal of the best-fit plane.
+    pub axes: [Vector3<f64>; 3],
+}
+
+impl Shape {
+    /// PCA of the points (a degenerate shape for fewer than 3 points).
+    pub fn of(points: impl Iterator<Item = Point3<f64>> + Clone) -> Self {
+        let mut count = 0usize;
+        let mut sum = Vector3::zeros();
+        for p in points.clone() {
+            sum += p.coords;
+            count += 1;
+        }
+        if count == 0 {
+            return Self {
+                count,
+                centroid: Point3::origin(),
+                eigenvalues: [0.0; 3],
+                axes: [Vector3::x(), Vector3::y(), Vector3::z()],
+            };
+        }
+        let centroid = Point3::from(sum / count as f64);
+        let mut covariance = Matrix3::zeros();
+        for p in points {
+            let d = p - centroid;
+            covariance += d * d.transpose();
+        }
+        covariance /= count as f64;
+        let eigen = SymmetricEigen::new(covariance);
+        let mut order = [0usize, 1, 2];
+        order.sort_by(|&a, &b| eigen.eigenvalues[b].total_cmp(&eigen.eigenvalues[a]));
+        let eigenvalues = order.map(|i| eigen.eigenvalues[i].max(0.0));
+        let axes = order.map(|i| eigen.eigenvectors.column(i).into_owned());
+        Self {
+            count,
+            centroid,
+            eigenvalues,
+            axes,
+        }
+    }
+
+    /// Thickness relative to width, `√(λ₃/λ₂)`: 0 for a flat patch.
+    pub fn flatness(&self) -> f64 {
+        (self.eigenvalues[2] / self.eigenvalues[1].max(1e-300)).sqrt()
+    }
+
+    /// Width relative to length, `√(λ₂/λ₁)`: 0 for a line.
+    pub fn width_ratio(&self) -> f64 {
+        (self.eigenvalues[1] / self.eigenvalues[0].max(1e-300)).sqrt()
+    }
+
+    /// Length along the main axis of a uniformly covered patch, `√(12 λ₁)`.
+    pub fn length(&self) -> f64 {
+        (12.0 * self.eigenvalues[0]).sqrt()
+    }
+
+    /// Unit normal of the best-fit plane.
+    pub fn normal(&self) -> Vector3<f64> {
+        self.axes[2]
+    }
+
+    /// How far the points are from a smooth sheet: the RMS residual of the least-squares
+    /// quadratic height field `w = a + bu + cv + du² + euv + fv²` over the PCA plane, relative
+    /// to the group's length. Near 0 for a leaf, however bent or cupped; large for a tangle of
+    /// leaves or a stem junction. Infinite for fewer than 6 points.
+    pub fn sheet_residual(&self, points: impl Iterator<Item = Point3<f64>>) -> f64 {
+        let mut normal_matrix = nalgebra::SMatrix::<f64, 6, 6>::zeros();
+        let mut rhs = nalgebra::SVector::<f64, 6>::zeros();
+        let mut samples = Vec::new();
+        let scale = self.length().max(1e-12);
+        for p in points {
+            let d = p - self.centroid;
+            let (u, v, w) = (
+                d.dot(&self.axes[0]) / scale,
+                d.dot(&self.axes[1]) / scale,
+                d.dot(&self.axes[2]) / scale,
+            );
+            let basis = nalgebra::SVector::<f64, 6>::from([1.0, u, v, u * u, u * v, v * v]);
+            normal_matrix += basis * basis.transpose();
+            rhs += basis * w;
+            samples.push((basis, w));
+        }
+        if samples.len() < 6 {
+            return f64::INFINITY;
+        }
+        let regularised = normal_matrix + nalgebra::SMatrix::<f64, 6, 6>::identity() * 1e-9;
+        let Some(coefficients) = regularised.cholesky().map(|c| c.solve(&rhs)) else {
+            return f64::INFINITY;
+        };
+        let squares: f64 = samples
+            .iter()
+            .map(|(basis, w)| (basis.dot(&coefficients) - w).powi(2))
+            .sum();
+        (squares / samples.len() as f64).sqrt()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plane_line_and_blob() {
+        let plane: Vec<Point3<f64>> = (0..400)
+            .map(|k| Point3::new((k % 20) as f64 * 0.01, (k / 20) as f64 * 0.005, 0.0))
+            .collect();
+        let s = Shape::of(plane.iter().copied());
+        assert!(s.flatness() < 1e-6);
+        assert!(s.normal().z.abs() > 0.999);
+        assert!((s.length() - 0.2).abs() < 0.02, "{}", s.length());
+        let line: Vec<Point3<f64>> = (0..50).map(|k| Point3::new(0.0, 0.0, k as f64)).collect();
+        assert!(Shape::of(line.iter().copied()).width_ratio() < 1e-6);
+        assert_eq!(Shape::of(std::iter::empty()).count, 0);
+    }
+
+    #[test]
+    fn a_bent_sheet_is_a_sheet_and_two_crossed_sheets_are_not() {
+        let bent: Vec<Point3<f64>> = (0..900)
+            .map(|k| {
+                let (u, v) = ((k % 30) as f64 / 30.0 * 0.2, (k / 30) as f64 / 30.0 * 0.1);
+                Point3::new(u, v, 2.0 * u * u - 0.5 * v * v)
+            })
+            .collect();
+        let shape = Shape::of(bent.iter().copied());
+        assert!(shape.sheet_residual(bent.iter().copied()) < 0.005);
+        let mut crossed = bent.clone();
+        crossed.extend(bent.iter().map(|p| Point3::new(p.x, p.z, p.y)));
+        let shape = Shape::of(crossed.iter().copied());
+        assert!(shape.sheet_residual(crossed.iter().copied()) > 0.03);
+    }
+}
