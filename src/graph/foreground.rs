@@ -410,6 +410,7 @@ pub fn separate_foreground(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::graph::test_support::{patch, ring_model, tube};
 
     #[test]
     fn closest_point_of_lines_through_a_common_point() {
@@ -432,5 +433,77 @@ mod tests {
             (Point3::new(0.0, 1.0, 0.0), Vector3::x()),
         ];
         assert!(closest_point_to_lines(&parallel).is_none());
+    }
+
+    #[test]
+    fn floor_background_stem_and_leaves_are_told_apart() {
+        let (x, y, z) = (Vector3::x(), Vector3::y(), Vector3::z());
+        let mut positions = patch(Point3::new(0.0, 0.0, 0.0), x, y, 120, 0.01); // floor 1.2 m
+        let floor = positions.len();
+        let stem = tube(Point3::new(0.0, 0.0, 0.0), 0.004, 0.3, 0.0015);
+        positions.extend(&stem);
+        let stem_end = positions.len();
+        let leaf_a = patch(Point3::new(0.06, 0.0, 0.3), x, y, 40, 0.0015);
+        let leaf_b = patch(
+            Point3::new(-0.05, 0.03, 0.22),
+            (x + z * 0.3).normalize(),
+            y,
+            40,
+            0.0015,
+        );
+        positions.extend(&leaf_a);
+        positions.extend(&leaf_b);
+        let leaves_end = positions.len();
+        // A far wall ring, beyond the plant's radius.
+        for k in 0..2000 {
+            let a = std::f64::consts::TAU * k as f64 / 2000.0;
+            positions.push(Point3::new(
+                2.5 * a.cos(),
+                2.5 * a.sin(),
+                0.3 + 0.2 * (k % 5) as f64,
+            ));
+        }
+        let model = ring_model(&positions);
+        let points = PointSet::from_reconstruction(&model);
+        let found = separate_foreground(&points, &model, &ForegroundOptions::default()).unwrap();
+        let floor_plane = found.floor.expect("floor found");
+        assert!(
+            floor_plane.normal.z > 0.999 && floor_plane.offset.abs() < 1e-3,
+            "{floor_plane:?}"
+        );
+        let count = |range: std::ops::Range<usize>, class: PointClass| {
+            range.filter(|&i| found.class[i] == class).count()
+        };
+        assert!(count(0..floor, PointClass::Floor) as f64 > 0.99 * floor as f64);
+        let stem_points = stem_end - floor;
+        assert!(count(floor..stem_end, PointClass::Stem) as f64 > 0.7 * stem_points as f64);
+        let leaf_points = leaves_end - stem_end;
+        assert!(count(stem_end..leaves_end, PointClass::Plant) as f64 > 0.97 * leaf_points as f64);
+        let far = positions.len() - leaves_end;
+        let background = count(leaves_end..positions.len(), PointClass::Background)
+            + count(leaves_end..positions.len(), PointClass::Wall);
+        assert!(background as f64 > 0.99 * far as f64);
+    }
+
+    #[test]
+    fn no_points_and_no_plant_are_clear_errors() {
+        let model = ring_model(&[]);
+        let points = PointSet::from_reconstruction(&model);
+        assert_eq!(
+            separate_foreground(&points, &model, &ForegroundOptions::default()).unwrap_err(),
+            ForegroundError::NoPoints
+        );
+        // Only a floor: nothing is left for the plant.
+        let floor = patch(
+            Point3::new(0.0, 0.0, 0.0),
+            Vector3::x(),
+            Vector3::y(),
+            60,
+            0.02,
+        );
+        let model = ring_model(&floor);
+        let points = PointSet::from_reconstruction(&model);
+        let err = separate_foreground(&points, &model, &ForegroundOptions::default()).unwrap_err();
+        assert!(matches!(err, ForegroundError::NoPlant(_)), "{err}");
     }
 }

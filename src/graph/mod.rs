@@ -16,6 +16,8 @@ pub mod ncut;
 pub mod pipeline;
 pub mod points;
 pub mod shape;
+#[cfg(test)]
+pub(crate) mod test_support;
 pub mod visibility;
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
