@@ -1,68 +1,157 @@
-//! Tuning aid: for each ground-truth leaf of a synthetic dataset, which predicted segments hold
-//! its points, and for each large predicted leaf segment, what it is made of.
-//! Usage: `cargo run --example segment_breakdown -- DATASET PREDICTION`.
+//! Tuning aid: runs the segmentation on a synthetic dataset and shows, for each ground-truth
+//! leaf, where its points went: leaf segments (by id), or why not (stem class, a segment
+//! labelled other/stem/pot, unassigned, floor/background/outlier).
+//! Usage: `cargo run --release --example segment_breakdown -- DATASET [--only-missed]`.
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use frond::eval::{GroundTruth, read_labelled_points};
+use frond::eval::{EvalOptions, GroundTruth, MatchingOptions, score_leaves};
+use frond::graph::foreground::PointClass;
+use frond::graph::pipeline::{SegmentOptions, segment_scene};
+use frond::scene::Scene;
+use frond::util::progress::NoProgress;
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().collect();
-    let truth = GroundTruth::load(Path::new(args.get(1).context("dataset")?))?;
-    let pred = read_labelled_points(
-        &Path::new(args.get(2).context("prediction")?).join("segmentation.ply"),
-    )?;
-    let parts = truth.points.parts.clone().context("parts")?;
-    let gt_label = |i: usize| -> String {
-        let l = truth.points.leaf_ids[i];
-        if l >= 0 {
-            format!("leaf{l}")
-        } else {
-            parts[i].name().to_owned()
+    let root = Path::new(args.get(1).context("dataset")?);
+    let only_missed = args.iter().any(|a| a == "--only-missed");
+    let truth = GroundTruth::load(root)?;
+    let scene = Scene::open(root)?;
+    let segmentation = segment_scene(&scene, &SegmentOptions::default(), &NoProgress)?;
+    let predicted = segmentation.leaf_ids();
+    let scores = score_leaves(
+        &truth.points.leaf_ids,
+        &predicted,
+        &MatchingOptions::default(),
+    );
+    let matched: std::collections::HashSet<i64> =
+        scores.matches.iter().map(|m| m.gt_leaf).collect();
+    let _ = EvalOptions::default();
+    let fate = |i: usize| -> String {
+        if predicted[i] >= 0 {
+            return format!("{}", predicted[i]);
+        }
+        match segmentation.foreground.class[i] {
+            PointClass::Plant => match segmentation.point_segment[i] {
+                Some(s) => format!("{:?}", segmentation.segments[s as usize].label).to_lowercase(),
+                None => "unassigned".into(),
+            },
+            other => format!("{other:?}").to_lowercase(),
         }
     };
-    let mut by_gt: BTreeMap<String, HashMap<i64, usize>> = BTreeMap::new();
-    let mut by_pred: BTreeMap<i64, HashMap<String, usize>> = BTreeMap::new();
-    for i in 0..pred.leaf_ids.len() {
-        *by_gt
-            .entry(gt_label(i))
-            .or_default()
-            .entry(pred.leaf_ids[i])
-            .or_insert(0) += 1;
-        *by_pred
-            .entry(pred.leaf_ids[i])
-            .or_default()
-            .entry(gt_label(i))
-            .or_insert(0) += 1;
+    let mut by_gt: BTreeMap<i64, HashMap<String, usize>> = BTreeMap::new();
+    for i in 0..predicted.len() {
+        let l = truth.points.leaf_ids[i];
+        if l >= 0 {
+            *by_gt.entry(l).or_default().entry(fate(i)).or_insert(0) += 1;
+        }
     }
-    println!("== ground truth -> predicted leaf segments (-1 = not a leaf)");
-    for (label, segments) in &by_gt {
-        let total: usize = segments.values().sum();
-        let mut top: Vec<(i64, usize)> = segments.iter().map(|(&s, &c)| (s, c)).collect();
-        top.sort_by_key(|&(s, c)| (std::cmp::Reverse(c), s));
-        let shown: Vec<String> = top
-            .iter()
-            .take(6)
-            .map(|(s, c)| format!("{s}:{c}"))
-            .collect();
-        println!("{label:>12} {total:>6}  {}", shown.join("  "));
-    }
-    println!("== predicted leaf segments with >= 50 points -> ground truth");
-    for (segment, labels) in &by_pred {
-        let total: usize = labels.values().sum();
-        if *segment < 0 || total < 50 {
+    println!(
+        "recall {:.3} ({}/{}), {} leaf segments",
+        scores.recall, scores.matched, scores.gt_leaves, scores.predicted_segments
+    );
+    for (leaf, fates) in &by_gt {
+        let total: usize = fates.values().sum();
+        if total < 20 || (only_missed && matched.contains(leaf)) {
             continue;
         }
-        let mut top: Vec<(&String, &usize)> = labels.iter().collect();
-        top.sort_by_key(|&(l, c)| (std::cmp::Reverse(*c), l.clone()));
+        let mut top: Vec<(&String, &usize)> = fates.iter().collect();
+        top.sort_by_key(|&(f, c)| (std::cmp::Reverse(*c), f.clone()));
+        let shown: Vec<String> = top
+            .iter()
+            .take(5)
+            .map(|(f, c)| format!("{f}:{c}"))
+            .collect();
+        let mark = if matched.contains(leaf) { " " } else { "✗" };
+        println!("{mark} leaf{leaf:<4} {total:>5}  {}", shown.join("  "));
+        // For leaves split between leaf segments: is the union of the two largest a sheet?
+        let segments: Vec<i64> = top
+            .iter()
+            .filter_map(|(f, _)| f.parse::<i64>().ok())
+            .take(2)
+            .collect();
+        if segments.len() == 2 {
+            let members = |s: i64| -> Vec<nalgebra::Point3<f64>> {
+                (0..predicted.len())
+                    .filter(|&i| predicted[i] == s)
+                    .map(|i| segmentation.points.positions[i])
+                    .collect()
+            };
+            let residual = |points: &[nalgebra::Point3<f64>]| {
+                frond::graph::shape::Shape::of(points.iter().copied())
+                    .sheet_residual(points.iter().copied())
+            };
+            let (a, b) = (members(segments[0]), members(segments[1]));
+            let union: Vec<_> = a.iter().chain(&b).copied().collect();
+            // Contact: kNN pairs (K=3) between the two within the 3D threshold.
+            let idx = |s: i64| -> Vec<usize> {
+                (0..predicted.len())
+                    .filter(|&i| predicted[i] == s)
+                    .collect()
+            };
+            let (ia, ib) = (idx(segments[0]), idx(segments[1]));
+            let both: Vec<usize> = ia.iter().chain(&ib).copied().collect();
+            let subset = segmentation.points.subset(&both);
+            let pairs = frond::graph::knn_pairs(&subset, 3);
+            let crossing = pairs
+                .iter()
+                .filter(|(x, y)| ((*x as usize) < ia.len()) != ((*y as usize) < ia.len()))
+                .count();
+            if std::env::var("FROND_HIST").is_ok() {
+                let shape = frond::graph::shape::Shape::of(
+                    both.iter().map(|&i| segmentation.points.positions[i]),
+                );
+                let mut hist = [[0usize; 2]; 24];
+                for (k, &i) in both.iter().enumerate() {
+                    let d = segmentation.points.positions[i] - shape.centroid;
+                    let v =
+                        d.dot(&shape.axes[1]) / (4.0 * shape.eigenvalues[1].sqrt()) * 12.0 + 12.0;
+                    let bin = (v.max(0.0) as usize).min(23);
+                    hist[bin][(k >= ia.len()) as usize] += 1;
+                }
+                println!("      across-axis histogram (a|b): {:?}", hist);
+            }
+            println!(
+                "      contact pairs {crossing} (ratio {:.2})",
+                crossing as f64 / (ia.len().min(ib.len()) as f64).sqrt()
+            );
+            println!(
+                "      sheet residual: {:.4} + {:.4} -> union {:.4}",
+                residual(&a),
+                residual(&b),
+                residual(&union)
+            );
+        }
+    }
+    // Leaf segments that recover no GT leaf: what are they made of?
+    let matched_segments: std::collections::HashSet<i64> =
+        scores.matches.iter().map(|m| m.segment).collect();
+    let parts = truth.points.parts.clone().context("parts")?;
+    let mut extra: BTreeMap<i64, HashMap<String, usize>> = BTreeMap::new();
+    for i in 0..predicted.len() {
+        if predicted[i] >= 0 && !matched_segments.contains(&predicted[i]) {
+            let what = match truth.points.leaf_ids[i] {
+                l if l >= 0 => format!("leaf{l}"),
+                _ => parts[i].name().to_owned(),
+            };
+            *extra
+                .entry(predicted[i])
+                .or_default()
+                .entry(what)
+                .or_insert(0) += 1;
+        }
+    }
+    for (segment, content) in extra {
+        let mut top: Vec<(String, usize)> = content.into_iter().collect();
+        top.sort_by_key(|(w, c)| (std::cmp::Reverse(*c), w.clone()));
         let shown: Vec<String> = top
             .iter()
             .take(4)
-            .map(|(l, c)| format!("{l}:{c}"))
+            .map(|(w, c)| format!("{w}:{c}"))
             .collect();
-        println!("{segment:>5} {total:>6}  {}", shown.join("  "));
+        println!("  unmatched segment {segment}: {}", shown.join("  "));
     }
     Ok(())
 }

@@ -63,11 +63,11 @@ pub struct ForegroundOptions {
     pub max_radius_fraction: f64,
     /// Connected clusters smaller than this are outliers.
     pub min_cluster_points: usize,
-    /// Neighbours for the local shape that tells stems from leaves.
+    /// Neighbours over which the normal coherence that tells stems from leaves is measured.
     pub stem_neighbours: usize,
-    /// A point is on a stem when its neighbourhood's thickness `√(λ₃/λ₂)` exceeds this and
-    /// twice the plant's median thickness (which reflects the points' noise).
-    pub min_stem_thickness: f64,
+    /// A point is on a stem when the median `|n_i · n_p|` of its neighbours' normals is below
+    /// this (see [`super::local_shape::normal_coherence`]).
+    pub max_stem_coherence: f64,
     pub seed: u64,
 }
 
@@ -78,8 +78,8 @@ impl Default for ForegroundOptions {
             min_plane_fraction: 0.03,
             max_radius_fraction: 0.6,
             min_cluster_points: 30,
-            stem_neighbours: 40,
-            min_stem_thickness: 0.3,
+            stem_neighbours: 20,
+            max_stem_coherence: 0.9,
             seed: 1,
         }
     }
@@ -387,13 +387,17 @@ pub fn separate_foreground(
         ));
     }
 
-    // Stems: points whose neighbourhood wraps around a thin tube.
+    // Stems: points whose surroundings turn around a thin tube (incoherent normals).
     let plant: Vec<usize> = (0..n).filter(|&i| class[i] == PointClass::Plant).collect();
-    let shapes = super::local_shape::local_shapes(&points.subset(&plant), options.stem_neighbours);
-    let median_thickness = median(&mut shapes.iter().map(|s| s.thickness).collect::<Vec<_>>());
-    let stem_threshold = options.min_stem_thickness.max(2.0 * median_thickness);
-    for (local, shape) in shapes.iter().enumerate() {
-        if shape.thickness > stem_threshold {
+    let plant_points = points.subset(&plant);
+    let normals: Vec<Vector3<f64>> = super::local_shape::local_shapes(&plant_points, 8)
+        .iter()
+        .map(|s| s.normal)
+        .collect();
+    let coherence =
+        super::local_shape::normal_coherence(&plant_points, &normals, options.stem_neighbours);
+    for (local, &c) in coherence.iter().enumerate() {
+        if c < options.max_stem_coherence {
             class[plant[local]] = PointClass::Stem;
         }
     }
@@ -440,7 +444,7 @@ mod tests {
         let (x, y, z) = (Vector3::x(), Vector3::y(), Vector3::z());
         let mut positions = patch(Point3::new(0.0, 0.0, 0.0), x, y, 120, 0.01); // floor 1.2 m
         let floor = positions.len();
-        let stem = tube(Point3::new(0.0, 0.0, 0.0), 0.004, 0.3, 0.0015);
+        let stem = tube(Point3::new(0.0, 0.0, 0.0), 0.0025, 0.3, 0.0015);
         positions.extend(&stem);
         let stem_end = positions.len();
         let leaf_a = patch(Point3::new(0.06, 0.0, 0.3), x, y, 40, 0.0015);

@@ -23,8 +23,8 @@ pub struct LanczosOptions {
 impl Default for LanczosOptions {
     fn default() -> Self {
         Self {
-            max_iterations: 120,
-            tolerance: 1e-6,
+            max_iterations: 60,
+            tolerance: 1e-4,
             seed: 7,
         }
     }

@@ -52,3 +52,85 @@ pub fn local_shapes(points: &PointSet, k: usize) -> Vec<LocalShape> {
         })
         .collect()
 }
+
+/// How consistently the surface around each point faces one way (stems are found where the
+/// tube radius is under about twice the point spacing; thicker stems look locally like sheets
+/// and are told apart per segment instead): the median, over the point's
+/// `k` nearest neighbours, of `|n_i · n_p|` for small-scale normals `normals`. Near 1 on a leaf
+/// (even beside another surface, which holds a minority of the neighbours); low on a thin stem,
+/// whose normals turn all the way around within the neighbourhood.
+pub fn normal_coherence(
+    points: &PointSet,
+    normals: &[nalgebra::Vector3<f64>],
+    k: usize,
+) -> Vec<f64> {
+    let coordinates: Vec<[f64; 3]> = points.positions.iter().map(|p| [p.x, p.y, p.z]).collect();
+    let Ok(tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&coordinates) else {
+        return vec![1.0; points.len()];
+    };
+    let Some(wanted) = std::num::NonZero::new((k + 1).min(points.len())) else {
+        return Vec::new();
+    };
+    coordinates
+        .par_iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let neighbours = tree
+                .query(c)
+                .nearest_n::<SquaredEuclidean<f64>>(wanted)
+                .execute();
+            let mut agreement: Vec<f64> = neighbours
+                .iter()
+                .filter(|r| r.item as usize != i)
+                .map(|r| normals[r.item as usize].dot(&normals[i]).abs())
+                .collect();
+            if agreement.is_empty() {
+                return 1.0;
+            }
+            agreement.sort_by(f64::total_cmp);
+            agreement[agreement.len() / 2]
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::graph::test_support::{patch, tube};
+    use nalgebra::{Point3, Vector3};
+
+    fn set(positions: Vec<Point3<f64>>) -> PointSet {
+        let n = positions.len();
+        PointSet {
+            positions,
+            colors: vec![[0; 3]; n],
+            views: vec![vec![0]; n],
+            point_ids: (0..n as u64).collect(),
+        }
+    }
+
+    #[test]
+    fn tubes_are_incoherent_and_sheets_coherent() {
+        // A tube whose radius is under twice the point spacing: its neighbourhoods wrap around.
+        let tube = set(tube(Point3::origin(), 0.0025, 0.2, 0.0015));
+        let normals: Vec<_> = local_shapes(&tube, 8).iter().map(|s| s.normal).collect();
+        let coherence = normal_coherence(&tube, &normals, 20);
+        let low = coherence.iter().filter(|&&c| c < 0.9).count();
+        assert!(
+            low as f64 > 0.9 * tube.len() as f64,
+            "{low} of {}",
+            tube.len()
+        );
+
+        let sheet = set(patch(
+            Point3::origin(),
+            Vector3::x(),
+            Vector3::y(),
+            40,
+            0.0015,
+        ));
+        let normals: Vec<_> = local_shapes(&sheet, 8).iter().map(|s| s.normal).collect();
+        let coherence = normal_coherence(&sheet, &normals, 20);
+        assert!(coherence.iter().all(|&c| c > 0.99));
+    }
+}

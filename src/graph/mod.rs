@@ -12,6 +12,7 @@ pub mod foreground;
 pub mod gradient;
 pub mod lanczos;
 pub mod local_shape;
+pub mod maxflow;
 pub mod ncut;
 pub mod pipeline;
 pub mod points;
@@ -80,6 +81,8 @@ pub struct PointGraph {
     pub options: GraphOptions,
     /// Edges dropped because their ends share no view.
     pub dropped_not_covisible: usize,
+    /// Unoriented unit normal per node (PCA of its 10 nearest neighbours).
+    pub normals: Vec<nalgebra::Vector3<f64>>,
 }
 
 /// Root mean square of the values below their 99th percentile (a scale robust to outliers).
@@ -163,11 +166,7 @@ impl PointGraph {
     pub fn build(points: &PointSet, views: &[ViewData<'_>], options: GraphOptions) -> Self {
         let pairs = knn_pairs(points, options.knn);
         let use_images = options.alpha > 0.0;
-        let normals = if use_images {
-            estimate_normals(points, 10)
-        } else {
-            Vec::new()
-        };
+        let normals = estimate_normals(points, 10);
         let depth_maps = use_images.then(|| visibility::DepthMaps::build(points, views, 2.0));
         // Per edge: (a, b, d3D, d2D, Σg², #g) over the gradient samples of all common views.
         type Measured = Option<(u32, u32, f32, f32, f64, usize)>;
@@ -268,6 +267,7 @@ impl PointGraph {
             sigma_2d,
             options,
             dropped_not_covisible,
+            normals,
         };
         for e in &mut edges {
             e.weight = graph.weight(e.d3d as f64, e.d2d as f64) as f32;

@@ -32,6 +32,9 @@ pub struct NcutOptions {
     /// Sheet residual (see [`Shape::sheet_residual`]) above which a group is not one smooth
     /// surface and so not a single leaf.
     pub max_sheet_residual: f64,
+    /// Region merging joins two segments whose union is a sheet when at least this many kNN
+    /// pairs × √(smaller size) connect them (a shared border, not a touching corner).
+    pub min_merge_contact: f64,
 }
 
 impl Default for NcutOptions {
@@ -42,6 +45,7 @@ impl Default for NcutOptions {
             boundary_ratio: 0.3,
             bottleneck: 0.35,
             max_sheet_residual: 0.02,
+            min_merge_contact: 0.2,
         }
     }
 }

@@ -282,12 +282,17 @@ fn merge_sheets(
     }
 }
 
+/// Mean `|n_i · n̄|` a leaf's point normals keep with its plane normal (≥ 0.8: within ~37°
+/// on average, a leaf bent by up to ~75°); a piece of stem surface averages about 2/π ≈ 0.64.
+const MIN_LEAF_FACING: f64 = 0.8;
+
 /// Labels a segment from its shape and place: a *stem* is long and thin; the *pot* is a low
 /// surface of revolution about the plant's vertical axis (nearly constant distance from it);
 /// a *leaf* is one smooth sheet; anything else is *other*.
 fn classify(
     shape: &Shape,
     points: &[Point3<f64>],
+    normals: &[nalgebra::Vector3<f64>],
     foreground: &Foreground,
     plant_height: f64,
     options: &NcutOptions,
@@ -317,10 +322,32 @@ fn classify(
         .sum::<f64>()
         / radial.len() as f64)
         .sqrt();
-    if height(&shape.centroid) < 0.35 * plant_height && spread < 0.1 * mean_radius {
+    // Which twelfths of the circle around the axis the segment covers: a leaf never wraps
+    // around the plant's axis, the pot and the soil do.
+    let reference = crate::branch::any_perpendicular(&up);
+    let other = up.cross(&reference);
+    let mut covered = [false; 12];
+    for p in points {
+        let d = p - foreground.plant_center;
+        let angle = d.dot(&other).atan2(d.dot(&reference));
+        let bin = ((angle + std::f64::consts::PI) / std::f64::consts::TAU * 12.0) as usize;
+        covered[bin.min(11)] = true;
+    }
+    let wraps = covered.iter().filter(|c| **c).count() >= 9;
+    if height(&shape.centroid) < 0.35 * plant_height && (spread < 0.1 * mean_radius || wraps) {
         return SegmentLabel::Pot;
     }
-    if shape.sheet_residual(points.iter().copied()) <= options.max_sheet_residual {
+    // A leaf is one smooth sheet (a cubic height field also follows leaves whose bend
+    // varies) that faces one way: its points' normals stay near the mean normal, where a piece
+    // of stem turns its normals around the stem's axis.
+    let facing = normals
+        .iter()
+        .map(|n| n.dot(&shape.normal()).abs())
+        .sum::<f64>()
+        / normals.len().max(1) as f64;
+    if facing >= MIN_LEAF_FACING
+        && shape.cubic_sheet_residual(points.iter().copied()) <= options.max_sheet_residual
+    {
         return SegmentLabel::Leaf;
     }
     SegmentLabel::Other
@@ -397,15 +424,33 @@ pub fn segment_scene(
     let clock = Instant::now();
     let adjacency = graph.adjacency();
     let components = adjacency.components();
+    let phase = Instant::now();
     let (groups, ncut_stats) = recursive_ncut(
         &adjacency,
         components.groups(),
         &plant_points.positions,
         &options.ncut,
     );
+    tracing::debug!(seconds = phase.elapsed().as_secs_f64(), "normalized cuts");
+    let phase = Instant::now();
     let (groups, _) = absorb_fragments(groups, &graph, options.ncut.min_segment_points);
-    let (groups, sheet_merges) =
-        merge_sheets(groups, &graph, &plant_points.positions, &options.ncut, 1.0);
+    tracing::debug!(
+        seconds = phase.elapsed().as_secs_f64(),
+        "fragments absorbed"
+    );
+    let phase = Instant::now();
+    let (groups, sheet_merges) = merge_sheets(
+        groups,
+        &graph,
+        &plant_points.positions,
+        &options.ncut,
+        options.ncut.min_merge_contact,
+    );
+    tracing::debug!(
+        seconds = phase.elapsed().as_secs_f64(),
+        merges = sheet_merges,
+        "sheets merged"
+    );
     let mut owner: Vec<Option<u32>> = vec![None; plant_points.len()];
     for (s, group) in groups.iter().enumerate() {
         for &node in group {
@@ -437,7 +482,16 @@ pub fn segment_scene(
             .map(|&i| plant_points.positions[i as usize])
             .collect();
         let shape = Shape::of(positions.iter().copied());
-        let label = classify(&shape, &positions, &foreground, plant_height, &options.ncut);
+        let normals: Vec<nalgebra::Vector3<f64>> =
+            group.iter().map(|&i| graph.normals[i as usize]).collect();
+        let label = classify(
+            &shape,
+            &positions,
+            &normals,
+            &foreground,
+            plant_height,
+            &options.ncut,
+        );
         let leaf_id = (label == SegmentLabel::Leaf).then(|| {
             next_leaf += 1;
             next_leaf - 1

@@ -77,8 +77,23 @@ impl Shape {
     /// to the group's length. Near 0 for a leaf, however bent or cupped; large for a tangle of
     /// leaves or a stem junction. Infinite for fewer than 6 points.
     pub fn sheet_residual(&self, points: impl Iterator<Item = Point3<f64>>) -> f64 {
-        let mut normal_matrix = nalgebra::SMatrix::<f64, 6, 6>::zeros();
-        let mut rhs = nalgebra::SVector::<f64, 6>::zeros();
+        self.height_field_residual::<6>(points)
+    }
+
+    /// As [`Shape::sheet_residual`] with a cubic height field (10 terms): also fits leaves whose
+    /// bend changes along the midrib. Infinite for fewer than 10 points.
+    pub fn cubic_sheet_residual(&self, points: impl Iterator<Item = Point3<f64>>) -> f64 {
+        self.height_field_residual::<10>(points)
+    }
+
+    /// RMS residual of a polynomial height field with the first `N` monomials of
+    /// `1, u, v, u², uv, v², u³, u²v, uv², v³`, relative to the length.
+    fn height_field_residual<const N: usize>(
+        &self,
+        points: impl Iterator<Item = Point3<f64>>,
+    ) -> f64 {
+        let mut normal_matrix = nalgebra::SMatrix::<f64, N, N>::zeros();
+        let mut rhs = nalgebra::SVector::<f64, N>::zeros();
         let mut samples = Vec::new();
         let scale = self.length().max(1e-12);
         for p in points {
@@ -88,15 +103,27 @@ impl Shape {
                 d.dot(&self.axes[1]) / scale,
                 d.dot(&self.axes[2]) / scale,
             );
-            let basis = nalgebra::SVector::<f64, 6>::from([1.0, u, v, u * u, u * v, v * v]);
+            let all = [
+                1.0,
+                u,
+                v,
+                u * u,
+                u * v,
+                v * v,
+                u * u * u,
+                u * u * v,
+                u * v * v,
+                v * v * v,
+            ];
+            let basis = nalgebra::SVector::<f64, N>::from_fn(|i, _| all[i]);
             normal_matrix += basis * basis.transpose();
             rhs += basis * w;
             samples.push((basis, w));
         }
-        if samples.len() < 6 {
+        if samples.len() < N {
             return f64::INFINITY;
         }
-        let regularised = normal_matrix + nalgebra::SMatrix::<f64, 6, 6>::identity() * 1e-9;
+        let regularised = normal_matrix + nalgebra::SMatrix::<f64, N, N>::identity() * 1e-9;
         let Some(coefficients) = regularised.cholesky().map(|c| c.solve(&rhs)) else {
             return f64::INFINITY;
         };

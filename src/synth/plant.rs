@@ -229,7 +229,8 @@ impl Builder {
             shape,
             length,
             width: length * shape.aspect() * self.rng.range(0.85, 1.15),
-            bend: self.rng.range(0.5, 2.5) / length,
+            // Total midrib bend between 11° and 75°: drooping, not hooked.
+            bend: self.rng.range(0.2, 1.3) / length,
             curl: self.rng.range(-0.8, 1.6) / length,
         }
     }

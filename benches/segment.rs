@@ -1,0 +1,104 @@
+//! Leaf segmentation speed on a synthetic medium plant with ~100k points and 36 views at
+//! 800x600 (issue targets: graph with weights < 1 s, whole segmentation < 5 s), split into its
+//! stages. Baseline in the same run: building the plain 3-NN pairs (kiddo) on the same points.
+
+use std::hint::black_box;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use frond::graph::foreground::{ForegroundOptions, PointClass, separate_foreground};
+use frond::graph::gradient::GradientImage;
+use frond::graph::pipeline::{SegmentOptions, segment_scene};
+use frond::graph::points::PointSet;
+use frond::graph::{GraphOptions, PointGraph, ViewData, knn_pairs};
+use frond::scene::Scene;
+use frond::synth::{Preset, SynthOptions, write_dataset};
+use frond::util::progress::NoProgress;
+
+fn segmentation(c: &mut Criterion) {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let root = dir.path().join("plant");
+    let options = SynthOptions {
+        preset: Preset::Medium,
+        seed: 20,
+        target_points: 125_000,
+        ..SynthOptions::default()
+    };
+    write_dataset(&options, &root, &NoProgress).expect("synthetic dataset");
+    let scene = Scene::open(&root).expect("scene");
+    let points = PointSet::from_scene(&scene);
+    eprintln!(
+        "{} points, {} views",
+        points.len(),
+        scene.reconstruction.images().len()
+    );
+    let model = &scene.reconstruction;
+    let foreground =
+        separate_foreground(&points, model, &ForegroundOptions::default()).expect("foreground");
+    let plant: Vec<usize> = (0..points.len())
+        .filter(|&i| foreground.class[i] == PointClass::Plant)
+        .collect();
+    let plant_points = points.subset(&plant);
+    let gradients: Vec<Option<GradientImage>> = model
+        .images()
+        .iter()
+        .map(|image| GradientImage::for_image(&scene, image).ok())
+        .collect();
+    let views: Vec<ViewData> = model
+        .images()
+        .iter()
+        .enumerate()
+        .map(|(v, image)| ViewData {
+            camera: model.camera_of(image),
+            camera_from_world: image.camera_from_world,
+            gradient: gradients[v].as_ref(),
+        })
+        .collect();
+
+    let mut group = c.benchmark_group("segmentation_100k_points_36_views");
+    group.sample_size(10);
+    group.bench_function("baseline_knn_pairs_k3", |b| {
+        b.iter(|| black_box(knn_pairs(&plant_points, 3)))
+    });
+    group.bench_function("foreground", |b| {
+        b.iter(|| {
+            black_box(separate_foreground(
+                &points,
+                model,
+                &ForegroundOptions::default(),
+            ))
+        })
+    });
+    group.bench_function("gradient_images_36_views", |b| {
+        b.iter(|| {
+            black_box(
+                model
+                    .images()
+                    .iter()
+                    .map(|image| GradientImage::for_image(&scene, image).ok())
+                    .collect::<Vec<_>>(),
+            )
+        })
+    });
+    group.bench_function("graph_with_weights", |b| {
+        b.iter(|| {
+            black_box(PointGraph::build(
+                &plant_points,
+                &views,
+                GraphOptions::default(),
+            ))
+        })
+    });
+    group.bench_function("whole_segmentation", |b| {
+        b.iter(|| {
+            black_box(segment_scene(
+                &scene,
+                &SegmentOptions::default(),
+                &NoProgress,
+            ))
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, segmentation);
+criterion_main!(benches);
