@@ -6,17 +6,21 @@
 //! - [`scene`]: COLMAP models (text and binary, every camera model), images, dense points.
 //! - [`graph`]: leaf segmentation (kNN graph with 3D/2D weights, threshold partition,
 //!   normalized cuts, foreground separation).
+//! - [`edit`]: the editing session (commands, undo/redo, project files); [`segment`]: image
+//!   boundaries of segments.
 //! - [`mesh`], [`branch`]: triangle meshes and generalized cylinders shared by every stage.
 //! - [`render`]: the headless wgpu render core.
 //! - [`synth`]: synthetic plants with ground truth; [`eval`]: scoring reconstructions.
 //! - [`util`]: atomic file output, deterministic random numbers, progress reporting.
 
 pub mod branch;
+pub mod edit;
 pub mod eval;
 pub mod graph;
 pub mod mesh;
 pub mod model;
 pub mod render;
 pub mod scene;
+pub mod segment;
 pub mod synth;
 pub mod util;

@@ -92,6 +92,14 @@ enum Command {
         #[command(flatten)]
         params: SegmentArgs,
     },
+    /// Re-apply a project's edits headlessly and write the resulting segmentation.
+    Replay {
+        /// The project file (*.frond).
+        project: PathBuf,
+        /// Output folder (default: next to the project, named after it with `_out`).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Score a reconstruction (segmentation.ply, plant.glb) against synthetic ground truth.
     Eval {
         /// The synthetic dataset (with gt/).
@@ -413,6 +421,36 @@ fn reconstruct(scene_args: &SceneArgs, params: &SegmentArgs, out: &Path) -> Resu
     Ok(())
 }
 
+fn replay(project: &Path, out: Option<&Path>) -> Result<()> {
+    let progress = BarProgress::new();
+    let session = frond::edit::open_project(project, &progress)
+        .with_context(|| format!("replaying {}", project.display()))?;
+    progress.bar.finish_and_clear();
+    let out = out.map(Path::to_path_buf).unwrap_or_else(|| {
+        let stem = project
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        project.with_file_name(format!("{stem}_out"))
+    });
+    session
+        .write_outputs(&out)
+        .with_context(|| format!("writing {}", out.display()))?;
+    let (history, position) = session.history();
+    eprintln!(
+        "replayed {position} of {} edits; {} leaves -> {}",
+        history.len(),
+        session
+            .segments()
+            .iter()
+            .flatten()
+            .filter(|s| s.label == frond::graph::pipeline::SegmentLabel::Leaf)
+            .count(),
+        out.display()
+    );
+    Ok(())
+}
+
 fn init_logging(verbose: u8) {
     let default = match verbose {
         0 => "warn",
@@ -452,6 +490,7 @@ fn main() -> Result<()> {
         ),
         Command::Segment { scene, out, params } => run_segmentation(scene, params, out).map(|_| ()),
         Command::Reconstruct { scene, out, params } => reconstruct(scene, params, out),
+        Command::Replay { project, out } => replay(project, out.as_deref()),
         Command::Eval {
             gt,
             pred,

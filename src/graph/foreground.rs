@@ -53,7 +53,7 @@ impl Plane {
 }
 
 /// Parameters of the separation.
-#[derive(Clone, Copy, Debug, Serialize)]
+#[derive(Clone, Copy, Debug, Serialize, PartialEq, serde::Deserialize)]
 pub struct ForegroundOptions {
     pub ransac_iterations: usize,
     /// A plane must hold this fraction of the points to count as floor or wall.

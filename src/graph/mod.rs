@@ -32,7 +32,7 @@ use points::{PointSet, common_views};
 use crate::scene::Camera;
 
 /// Parameters of the graph (seed 004 §5.1 defaults).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, serde::Deserialize)]
 pub struct GraphOptions {
     /// K nearest neighbours per point (K = 3).
     pub knn: usize,

@@ -19,7 +19,7 @@ use super::shape::Shape;
 use nalgebra::Point3;
 
 /// Stop criteria of the recursion.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, serde::Deserialize)]
 pub struct NcutOptions {
     /// Smallest segment worth keeping (points).
     pub min_segment_points: usize,

@@ -25,7 +25,7 @@ use crate::util::atomic::write_atomic;
 use crate::util::progress::Progress;
 
 /// All parameters of the automatic segmentation.
-#[derive(Clone, Copy, Debug, Default, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, serde::Deserialize)]
 pub struct SegmentOptions {
     pub graph: GraphOptions,
     pub ncut: NcutOptions,
@@ -33,7 +33,7 @@ pub struct SegmentOptions {
 }
 
 /// What a segment is.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SegmentLabel {
     Leaf,
@@ -106,6 +106,12 @@ pub struct Segmentation {
     pub ncut: NcutStats,
     pub timings: SegmentTimings,
     pub options: SegmentOptions,
+    /// The weighted graph over the plant points (the interactive edits re-cut it).
+    #[serde(skip)]
+    pub graph: PointGraph,
+    /// Graph node → index in `points`.
+    #[serde(skip)]
+    pub graph_points: Vec<usize>,
 }
 
 impl Segmentation {
@@ -527,6 +533,8 @@ pub fn segment_scene(
         ncut: ncut_stats,
         timings,
         options: *options,
+        graph,
+        graph_points: plant,
     })
 }
 

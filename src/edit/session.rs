@@ -1,0 +1,666 @@
+//! The editing session: current labels over the automatic segmentation, edits as commands
+//! with exact undo and redo.
+
+use std::collections::{BTreeMap, HashMap, HashSet};
+use std::sync::{Arc, Mutex};
+
+use nalgebra::Point2;
+use serde::{Deserialize, Serialize};
+
+use super::command::{Command, PixelRef};
+use super::stroke::{Side, Stroke};
+use crate::graph::maxflow::{MaxFlow, MaxFlowError, Segment as CutSide};
+use crate::graph::pipeline::{SegmentLabel, Segmentation};
+use crate::scene::{ImageId, Scene};
+use crate::segment::boundary::{Boundary, BoundaryError, BoundaryOptions, Oversegmentation};
+
+/// ε of the graph-cut smoothness term `1 / (d² + ε)` (seed 004 §5.3).
+pub const GRAPH_CUT_EPSILON: f64 = 1e-4;
+/// Clicks pick the nearest projected point within this distance (pixels).
+pub const PICK_TOLERANCE_PX: f64 = 12.0;
+/// Points projecting closer than this to a split stroke are left to the graph cut (pixels);
+/// farther ones are seeded on their side.
+pub const STROKE_MARGIN_PX: f64 = 8.0;
+
+/// The state of a segment.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SegmentState {
+    pub label: SegmentLabel,
+    pub confirmed: bool,
+}
+
+/// Why an edit could not be applied (the session is unchanged).
+#[derive(Debug, thiserror::Error)]
+pub enum EditError {
+    #[error("no image with id {0} in the model")]
+    UnknownImage(ImageId),
+    #[error(
+        "no point of a segment projects within {tolerance} px of ({x:.1}, {y:.1}) in image {image_id}"
+    )]
+    NothingUnderClick {
+        image_id: ImageId,
+        x: f64,
+        y: f64,
+        tolerance: f64,
+    },
+    #[error("the stroke needs at least two distinct finite points (three if closed)")]
+    InvalidStroke,
+    #[error("the stroke crosses no segment in image {0}")]
+    StrokeCrossesNothing(ImageId),
+    #[error("the stroke leaves all {0} points of the segment on one side")]
+    StrokeDoesNotSplit(usize),
+    #[error("both clicks are on the same segment")]
+    SameSegment,
+    #[error(transparent)]
+    MaxFlow(#[from] MaxFlowError),
+    #[error(transparent)]
+    Boundary(#[from] BoundaryError),
+}
+
+/// Everything an applied command changed, to undo and redo it exactly.
+#[derive(Clone, Debug, Default)]
+struct Change {
+    /// `(point, before, after)` segment ids (−1 = none).
+    points: Vec<(u32, i32, i32)>,
+    segments_before: Vec<Option<SegmentState>>,
+    segments_after: Vec<Option<SegmentState>>,
+    /// Merge edges appended (`added_edges` grows by this many).
+    added_edges: Vec<(u32, u32)>,
+    /// Graph edges newly cut by the stroke.
+    cut_edges: Vec<usize>,
+}
+
+struct Applied {
+    command: Command,
+    change: Change,
+}
+
+/// A point projected into a view.
+#[derive(Clone, Copy, Debug)]
+struct Projected {
+    point: u32,
+    uv: Point2<f64>,
+    depth: f64,
+}
+
+/// The editing session (see the module docs).
+pub struct Session {
+    scene: Scene,
+    segmentation: Segmentation,
+    /// Point → graph node.
+    node_of: Vec<Option<u32>>,
+    /// Per graph node: `(neighbour node, edge index)`.
+    adjacency: Vec<Vec<(u32, u32)>>,
+    segment_of: Vec<i32>,
+    segments: Vec<Option<SegmentState>>,
+    added_edges: Vec<(u32, u32)>,
+    cut_edges: HashSet<usize>,
+    history: Vec<Applied>,
+    cursor: usize,
+    projections: Mutex<HashMap<usize, Arc<Vec<Projected>>>>,
+    oversegmentations: Mutex<HashMap<usize, Arc<Oversegmentation>>>,
+    boundaries: HashMap<(u32, usize), Boundary>,
+    boundary_options: BoundaryOptions,
+}
+
+impl Session {
+    /// Starts a session on an automatic segmentation of `scene`.
+    pub fn new(scene: Scene, segmentation: Segmentation) -> Self {
+        let n = segmentation.points.len();
+        let mut node_of = vec![None; n];
+        for (node, &point) in segmentation.graph_points.iter().enumerate() {
+            node_of[point] = Some(node as u32);
+        }
+        let mut adjacency = vec![Vec::new(); segmentation.graph.num_nodes];
+        for (index, edge) in segmentation.graph.edges.iter().enumerate() {
+            adjacency[edge.a as usize].push((edge.b, index as u32));
+            adjacency[edge.b as usize].push((edge.a, index as u32));
+        }
+        let segment_of = segmentation
+            .point_segment
+            .iter()
+            .map(|s| s.map_or(-1, |s| s as i32))
+            .collect();
+        let segments = segmentation
+            .segments
+            .iter()
+            .map(|s| {
+                Some(SegmentState {
+                    label: s.label,
+                    confirmed: false,
+                })
+            })
+            .collect();
+        Self {
+            scene,
+            segmentation,
+            node_of,
+            adjacency,
+            segment_of,
+            segments,
+            added_edges: Vec::new(),
+            cut_edges: HashSet::new(),
+            history: Vec::new(),
+            cursor: 0,
+            projections: Mutex::new(HashMap::new()),
+            oversegmentations: Mutex::new(HashMap::new()),
+            boundaries: HashMap::new(),
+            boundary_options: BoundaryOptions::default(),
+        }
+    }
+
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    pub fn segmentation(&self) -> &Segmentation {
+        &self.segmentation
+    }
+
+    /// Current segment id per point (−1 = none).
+    pub fn segment_of(&self) -> &[i32] {
+        &self.segment_of
+    }
+
+    /// State of every segment id (`None` for ids whose points were merged away).
+    pub fn segments(&self) -> &[Option<SegmentState>] {
+        &self.segments
+    }
+
+    /// `leaf_id` per point: the segment id of leaf segments, −1 otherwise.
+    pub fn leaf_ids(&self) -> Vec<i64> {
+        self.segment_of
+            .iter()
+            .map(
+                |&s| match self.segments.get(s.max(0) as usize).copied().flatten() {
+                    Some(state) if s >= 0 && state.label == SegmentLabel::Leaf => s as i64,
+                    _ => -1,
+                },
+            )
+            .collect()
+    }
+
+    /// Points of a segment.
+    pub fn members(&self, segment: u32) -> Vec<u32> {
+        (0..self.segment_of.len() as u32)
+            .filter(|&p| self.segment_of[p as usize] == segment as i32)
+            .collect()
+    }
+
+    /// The commands applied so far (up to the undo position) and the redo-able ones after.
+    pub fn history(&self) -> (Vec<&Command>, usize) {
+        (
+            self.history.iter().map(|a| &a.command).collect(),
+            self.cursor,
+        )
+    }
+
+    pub fn can_undo(&self) -> bool {
+        self.cursor > 0
+    }
+
+    pub fn can_redo(&self) -> bool {
+        self.cursor < self.history.len()
+    }
+
+    /// The boundary computed for a segment in a view, if any.
+    pub fn boundary(&self, segment: u32, view: usize) -> Option<&Boundary> {
+        self.boundaries.get(&(segment, view))
+    }
+
+    fn view_index(&self, image_id: ImageId) -> Result<usize, EditError> {
+        self.scene
+            .reconstruction
+            .image_position(image_id)
+            .ok_or(EditError::UnknownImage(image_id))
+    }
+
+    /// Projections of the points seen in a view (cached).
+    fn projected(&self, view: usize) -> Arc<Vec<Projected>> {
+        let mut cache = self.projections.lock().unwrap_or_else(|e| e.into_inner());
+        cache
+            .entry(view)
+            .or_insert_with(|| {
+                let model = &self.scene.reconstruction;
+                let image = &model.images()[view];
+                let camera = model.camera_of(image);
+                let points = &self.segmentation.points;
+                Arc::new(
+                    (0..points.len())
+                        .filter(|&p| points.views[p].binary_search(&(view as u32)).is_ok())
+                        .filter_map(|p| {
+                            let point_camera = image.camera_from_world * points.positions[p];
+                            camera.project(&point_camera.coords).map(|uv| Projected {
+                                point: p as u32,
+                                uv,
+                                depth: point_camera.z,
+                            })
+                        })
+                        .collect(),
+                )
+            })
+            .clone()
+    }
+
+    /// The point of a segment under a click: nearest projection within the tolerance, the
+    /// front-most among near-ties.
+    pub fn pick(&self, at: &PixelRef) -> Result<u32, EditError> {
+        let view = self.view_index(at.image_id)?;
+        let click = Point2::new(at.pixel[0], at.pixel[1]);
+        let projected = self.projected(view);
+        let candidates: Vec<(f64, f64, u32)> = projected
+            .iter()
+            .filter(|p| self.segment_of[p.point as usize] >= 0)
+            .map(|p| ((p.uv - click).norm(), p.depth, p.point))
+            .filter(|(d, _, _)| *d <= PICK_TOLERANCE_PX)
+            .collect();
+        let nearest = candidates.iter().map(|c| c.0).fold(f64::INFINITY, f64::min);
+        candidates
+            .iter()
+            .filter(|c| c.0 <= nearest + 3.0)
+            .min_by(|a, b| a.1.total_cmp(&b.1).then(a.2.cmp(&b.2)))
+            .map(|c| c.2)
+            .ok_or(EditError::NothingUnderClick {
+                image_id: at.image_id,
+                x: click.x,
+                y: click.y,
+                tolerance: PICK_TOLERANCE_PX,
+            })
+    }
+
+    /// The segment under a click.
+    pub fn pick_segment(&self, at: &PixelRef) -> Result<u32, EditError> {
+        let point = self.pick(at)?;
+        Ok(self.segment_of[point as usize] as u32)
+    }
+
+    /// Applies a command; on error nothing changes. Redo-able commands after the undo
+    /// position are dropped.
+    pub fn apply(&mut self, command: Command) -> Result<(), EditError> {
+        let change = self.plan(&command)?;
+        self.forward(&change);
+        self.history.truncate(self.cursor);
+        self.history.push(Applied { command, change });
+        self.cursor += 1;
+        Ok(())
+    }
+
+    /// Undoes the last applied command; false when there is none.
+    pub fn undo(&mut self) -> bool {
+        if self.cursor == 0 {
+            return false;
+        }
+        self.cursor -= 1;
+        let change = self.history[self.cursor].change.clone();
+        self.backward(&change);
+        true
+    }
+
+    /// Redoes the next undone command; false when there is none.
+    pub fn redo(&mut self) -> bool {
+        if self.cursor >= self.history.len() {
+            return false;
+        }
+        let change = self.history[self.cursor].change.clone();
+        self.forward(&change);
+        self.cursor += 1;
+        true
+    }
+
+    fn forward(&mut self, change: &Change) {
+        for &(point, _, after) in &change.points {
+            self.segment_of[point as usize] = after;
+        }
+        self.segments = change.segments_after.clone();
+        self.added_edges.extend_from_slice(&change.added_edges);
+        self.cut_edges.extend(change.cut_edges.iter().copied());
+    }
+
+    fn backward(&mut self, change: &Change) {
+        for &(point, before, _) in change.points.iter().rev() {
+            self.segment_of[point as usize] = before;
+        }
+        self.segments = change.segments_before.clone();
+        let keep = self.added_edges.len() - change.added_edges.len();
+        self.added_edges.truncate(keep);
+        for edge in &change.cut_edges {
+            self.cut_edges.remove(edge);
+        }
+    }
+
+    /// Computes what a command would change, without changing anything.
+    fn plan(&mut self, command: &Command) -> Result<Change, EditError> {
+        let mut change = Change {
+            segments_before: self.segments.clone(),
+            segments_after: self.segments.clone(),
+            ..Change::default()
+        };
+        match command {
+            Command::ConfirmSegment { at } => {
+                let segment = self.pick_segment(at)?;
+                let view = self.view_index(at.image_id)?;
+                self.compute_boundary(segment, view)?;
+                if let Some(state) = change.segments_after[segment as usize].as_mut() {
+                    state.confirmed = true;
+                }
+            }
+            Command::MarkLeaf { at } => {
+                let segment = self.pick_segment(at)?;
+                if let Some(state) = change.segments_after[segment as usize].as_mut() {
+                    state.label = SegmentLabel::Leaf;
+                }
+            }
+            Command::MarkNonLeaf { at, label } => {
+                let segment = self.pick_segment(at)?;
+                if let Some(state) = change.segments_after[segment as usize].as_mut() {
+                    state.label = if *label == SegmentLabel::Leaf {
+                        SegmentLabel::Other
+                    } else {
+                        *label
+                    };
+                }
+            }
+            Command::MergeByClick { first, second } => {
+                let (a, b) = (self.pick(first)?, self.pick(second)?);
+                let (sa, sb) = (self.segment_of[a as usize], self.segment_of[b as usize]);
+                if sa == sb {
+                    return Err(EditError::SameSegment);
+                }
+                for p in self.members(sb as u32) {
+                    change.points.push((p, sb, sa));
+                }
+                change.segments_after[sb as usize] = None;
+                if let (Some(na), Some(nb)) = (self.node_of[a as usize], self.node_of[b as usize]) {
+                    change.added_edges.push((na, nb));
+                }
+            }
+            Command::ResetSegment { at } => {
+                let segment = self.pick_segment(at)?;
+                let members = self.members(segment);
+                let mut restored: BTreeMap<u32, SegmentState> = BTreeMap::new();
+                for &p in &members {
+                    let auto = self.segmentation.point_segment[p as usize];
+                    let after = auto.map_or(-1, |s| s as i32);
+                    if after != segment as i32 {
+                        change.points.push((p, segment as i32, after));
+                    }
+                    if let Some(s) = auto {
+                        restored.insert(
+                            s,
+                            SegmentState {
+                                label: self.segmentation.segments[s as usize].label,
+                                confirmed: false,
+                            },
+                        );
+                    }
+                }
+                let still_used = restored.contains_key(&segment);
+                for (s, state) in restored {
+                    change.segments_after[s as usize] = Some(state);
+                }
+                if !still_used {
+                    change.segments_after[segment as usize] = None;
+                }
+            }
+            Command::SplitByStroke {
+                image_id,
+                stroke,
+                closed,
+            } => {
+                self.plan_split(*image_id, stroke, *closed, &mut change)?;
+            }
+        }
+        Ok(change)
+    }
+
+    /// SplitByStroke (seed 004 §5.3): the segment crossed by the stroke is re-solved as a
+    /// two-label graph cut minimising Σ (1 − δ(l_p, l_q)) / (d²(p, q) + ε) + Σ D(l_p), with
+    /// hard data terms for the points projecting farther than the margin on either side,
+    /// and the graph edges crossing the stroke cut.
+    fn plan_split(
+        &self,
+        image_id: ImageId,
+        stroke: &[[f64; 2]],
+        closed: bool,
+        change: &mut Change,
+    ) -> Result<(), EditError> {
+        let view = self.view_index(image_id)?;
+        let stroke = Stroke::new(
+            stroke.iter().map(|p| Point2::new(p[0], p[1])).collect(),
+            closed,
+        )
+        .ok_or(EditError::InvalidStroke)?;
+        let projected = self.projected(view);
+        // The segment the stroke runs over: most points within 20 px of it.
+        let mut votes: BTreeMap<i32, usize> = BTreeMap::new();
+        for p in projected.iter() {
+            let s = self.segment_of[p.point as usize];
+            if s >= 0 && stroke.distance(&p.uv) <= 20.0 {
+                *votes.entry(s).or_insert(0) += 1;
+            }
+        }
+        let segment = votes
+            .into_iter()
+            .max_by_key(|&(s, count)| (count, std::cmp::Reverse(s)))
+            .map(|(s, _)| s)
+            .ok_or(EditError::StrokeCrossesNothing(image_id))?;
+        let members = self.members(segment as u32);
+        let local: HashMap<u32, u32> = members
+            .iter()
+            .enumerate()
+            .map(|(i, &p)| (p, i as u32))
+            .collect();
+        let uv: HashMap<u32, Point2<f64>> = projected
+            .iter()
+            .filter(|p| local.contains_key(&p.point))
+            .map(|p| (p.point, p.uv))
+            .collect();
+        // Seeds: points seen in the view between the margin and the stroke's reach; points
+        // farther away follow the graph (the stroke's extension is only a guess there).
+        let length: f64 = stroke
+            .points()
+            .windows(2)
+            .map(|w| (w[1] - w[0]).norm())
+            .sum();
+        let reach = (0.5 * length).max(40.0);
+        let mut flow = MaxFlow::new(members.len());
+        for (i, p) in members.iter().enumerate() {
+            if let Some(position) = uv.get(p)
+                && (STROKE_MARGIN_PX..=reach).contains(&stroke.distance(position))
+            {
+                match stroke.side(position) {
+                    Side::Inside => flow.add_terminal_weights(i, f64::INFINITY, 0.0)?,
+                    Side::Outside => flow.add_terminal_weights(i, 0.0, f64::INFINITY)?,
+                }
+            }
+        }
+        let graph = &self.segmentation.graph;
+        for (i, &p) in members.iter().enumerate() {
+            let Some(node) = self.node_of[p as usize] else {
+                continue;
+            };
+            for &(neighbour_node, edge) in &self.adjacency[node as usize] {
+                let q = self.segmentation.graph_points[neighbour_node as usize] as u32;
+                let Some(&j) = local.get(&q) else { continue };
+                if (j as usize) <= i || self.cut_edges.contains(&(edge as usize)) {
+                    continue;
+                }
+                if let (Some(a), Some(b)) = (uv.get(&p), uv.get(&q))
+                    && stroke.crosses(a, b)
+                {
+                    change.cut_edges.push(edge as usize);
+                    continue;
+                }
+                let d = graph.distance(&graph.edges[edge as usize]);
+                if d.is_finite() {
+                    let capacity = 1.0 / (d * d + GRAPH_CUT_EPSILON);
+                    flow.add_edge(i, j as usize, capacity, capacity)?;
+                }
+            }
+        }
+        for &(a, b) in &self.added_edges {
+            let (pa, pb) = (
+                self.segmentation.graph_points[a as usize] as u32,
+                self.segmentation.graph_points[b as usize] as u32,
+            );
+            if let (Some(&i), Some(&j)) = (local.get(&pa), local.get(&pb)) {
+                let capacity = 1.0 / GRAPH_CUT_EPSILON;
+                flow.add_edge(i as usize, j as usize, capacity, capacity)?;
+            }
+        }
+        flow.solve();
+        let inside: Vec<u32> = members
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| flow.segment(*i) == CutSide::Source)
+            .map(|(_, &p)| p)
+            .collect();
+        if inside.is_empty() || inside.len() == members.len() {
+            return Err(EditError::StrokeDoesNotSplit(members.len()));
+        }
+        let new_segment = change.segments_after.len() as i32;
+        let label = change.segments_after[segment as usize].map_or(SegmentLabel::Leaf, |s| s.label);
+        change.segments_after.push(Some(SegmentState {
+            label,
+            confirmed: false,
+        }));
+        if let Some(state) = change.segments_after[segment as usize].as_mut() {
+            state.confirmed = false;
+        }
+        for p in inside {
+            change.points.push((p, segment, new_segment));
+        }
+        Ok(())
+    }
+
+    /// Superpixels of a view (computed once, cached).
+    fn oversegmentation(&self, view: usize) -> Result<Arc<Oversegmentation>, EditError> {
+        if let Some(done) = self
+            .oversegmentations
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(&view)
+        {
+            return Ok(done.clone());
+        }
+        let image = &self.scene.reconstruction.images()[view];
+        let mat = self
+            .scene
+            .load_image(image)
+            .map_err(|e| BoundaryError::Image(e.to_string()))?;
+        let computed = Arc::new(Oversegmentation::compute(&mat, &self.boundary_options)?);
+        self.oversegmentations
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .insert(view, computed.clone());
+        Ok(computed)
+    }
+
+    /// Computes (and caches) the image boundary of a segment in a view (seed 004 §5.4).
+    pub fn compute_boundary(&mut self, segment: u32, view: usize) -> Result<&Boundary, EditError> {
+        let superpixels = self.oversegmentation(view)?;
+        let projected = self.projected(view);
+        let foreground: Vec<Point2<f64>> = projected
+            .iter()
+            .filter(|p| self.segment_of[p.point as usize] == segment as i32)
+            .map(|p| p.uv)
+            .collect();
+        let background: Vec<Point2<f64>> = projected
+            .iter()
+            .filter(|p| self.segment_of[p.point as usize] != segment as i32)
+            .map(|p| p.uv)
+            .collect();
+        let boundary = superpixels.boundary(&foreground, &background, &self.boundary_options)?;
+        self.boundaries.insert((segment, view), boundary);
+        Ok(&self.boundaries[&(segment, view)])
+    }
+
+    /// The view where a segment's boundary is best: among the views seeing most of its
+    /// points, the one with the largest region.
+    pub fn best_view(
+        &mut self,
+        segment: u32,
+        candidates: usize,
+    ) -> Result<Option<usize>, EditError> {
+        let members = self.members(segment);
+        let mut seen: BTreeMap<u32, usize> = BTreeMap::new();
+        for &p in &members {
+            for &v in &self.segmentation.points.views[p as usize] {
+                *seen.entry(v).or_insert(0) += 1;
+            }
+        }
+        let mut ranked: Vec<(usize, u32)> = seen.into_iter().map(|(v, c)| (c, v)).collect();
+        ranked.sort_by(|a, b| b.cmp(a));
+        let mut best: Option<(f64, usize)> = None;
+        for &(_, view) in ranked.iter().take(candidates.max(1)) {
+            let area = self.compute_boundary(segment, view as usize)?.area_px;
+            if best.is_none_or(|(a, _)| area > a) {
+                best = Some((area, view as usize));
+            }
+        }
+        Ok(best.map(|(_, v)| v))
+    }
+}
+
+impl Session {
+    /// Writes the current labels: `segmentation.ply` (every input point with its `leaf_id`,
+    /// the segment id of leaf segments) and `segments.json` (every live segment with label,
+    /// confirmation, size and computed boundaries).
+    pub fn write_outputs(&self, out: &std::path::Path) -> std::io::Result<()> {
+        std::fs::create_dir_all(out)?;
+        let points = &self.segmentation.points;
+        let ply = crate::model::segmentation_ply(
+            &points.positions,
+            &points.colors,
+            &points.point_ids,
+            &self.leaf_ids(),
+        );
+        crate::model::write_segmentation_ply(&out.join("segmentation.ply"), &ply)?;
+        let mut sizes = vec![0usize; self.segments.len()];
+        for &s in &self.segment_of {
+            if s >= 0 {
+                sizes[s as usize] += 1;
+            }
+        }
+        let segments: Vec<serde_json::Value> = self
+            .segments
+            .iter()
+            .enumerate()
+            .filter_map(|(id, state)| {
+                let state = state.as_ref()?;
+                (sizes[id] > 0).then(|| {
+                    let boundaries: Vec<serde_json::Value> = self
+                        .boundaries
+                        .iter()
+                        .filter(|((s, _), _)| *s == id as u32)
+                        .map(|((_, view), b)| {
+                            serde_json::json!({
+                                "image_id": self.scene.reconstruction.images()[*view].id,
+                                "area_px": b.area_px,
+                                "polygon": b.polygon,
+                            })
+                        })
+                        .collect();
+                    serde_json::json!({
+                        "id": id,
+                        "label": state.label,
+                        "confirmed": state.confirmed,
+                        "points": sizes[id],
+                        "boundaries": boundaries,
+                    })
+                })
+            })
+            .collect();
+        let (history, position) = self.history();
+        let json = serde_json::json!({
+            "format": "frond segments 1",
+            "points": points.len(),
+            "leaves": segments.iter().filter(|s| s["label"] == "leaf").count(),
+            "segments": segments,
+            "edits": history.len(),
+            "undo_position": position,
+        });
+        let text = serde_json::to_string_pretty(&json).map_err(std::io::Error::other)?;
+        crate::util::atomic::write_atomic(&out.join("segments.json"), text.as_bytes())
+    }
+}
