@@ -1,7 +1,8 @@
 //! Project files (`*.frond`): versioned JSON with the input's location, the segmentation
-//! parameters and the command history with the undo position. Written atomically (temp file
-//! + rename): a crash during a save leaves the previous file. Reopening replays the history on
-//! a fresh automatic segmentation, which is deterministic, so the state is the same.
+//! parameters and the command history with the undo position. Written atomically (a temporary
+//! file renamed over the old one): a crash during a save leaves the previous file. Reopening
+//! replays the history on a fresh automatic segmentation, which is deterministic, so the state
+//! is the same.
 
 use std::path::{Path, PathBuf};
 
