@@ -103,18 +103,28 @@ impl MaxFlow {
         self.check(node)?;
         Self::check_capacity(from_source)?;
         Self::check_capacity(to_sink)?;
-        // Only the difference matters for the cut; the common part is flow pushed at once.
-        let common = from_source.min(to_sink);
-        if common.is_finite() {
-            self.flow += common;
-            self.terminal[node] += from_source - common;
-            self.terminal[node] -= to_sink - common;
-        } else if from_source.is_infinite() && to_sink.is_infinite() {
-            self.flow = f64::INFINITY;
-        } else if from_source.is_infinite() {
-            self.terminal[node] = f64::INFINITY;
+        // Fold in what the node already has, then push the common part straight through:
+        // only the difference remains as a terminal capacity.
+        let existing = self.terminal[node];
+        let (mut from_source, mut to_sink) = (from_source, to_sink);
+        if existing > 0.0 {
+            from_source += existing;
         } else {
+            to_sink -= existing;
+        }
+        let common = from_source.min(to_sink);
+        if from_source.is_infinite() && to_sink.is_infinite() {
+            self.flow = f64::INFINITY;
+            self.terminal[node] = 0.0;
+        } else if from_source.is_infinite() {
+            self.flow += to_sink;
+            self.terminal[node] = f64::INFINITY;
+        } else if to_sink.is_infinite() {
+            self.flow += from_source;
             self.terminal[node] = f64::NEG_INFINITY;
+        } else {
+            self.flow += common;
+            self.terminal[node] = from_source - to_sink;
         }
         self.solved = false;
         Ok(())

@@ -1,0 +1,219 @@
+//! Interactive latencies (issue targets: split or merge of a ~5k-point segment < 10 ms; one
+//! segment's image boundary at 800x600 < 50 ms once the view is oversegmented) and
+//! Boykov–Kolmogorov against petgraph's Dinic on a 10k-node grid (same run).
+
+use std::hint::black_box;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use frond::edit::{Command, PixelRef, Session};
+use frond::graph::maxflow::MaxFlow;
+use frond::graph::pipeline::{SegmentLabel, SegmentOptions, segment_scene};
+use frond::scene::Scene;
+use frond::segment::boundary::{BoundaryOptions, Oversegmentation};
+use frond::synth::{Preset, SynthOptions, write_dataset};
+use frond::util::progress::NoProgress;
+use frond::util::rng::Rng;
+use petgraph::Graph;
+
+/// A 100×100 grid with 4-neighbour capacities and random terminal weights (a typical vision
+/// graph), as (nodes, terminal (source, sink) per node, edges (a, b, capacity)).
+fn grid(seed: u64) -> (usize, Vec<(f64, f64)>, Vec<(usize, usize, f64)>) {
+    let side = 100;
+    let mut rng = Rng::seed_from(seed);
+    let terminals = (0..side * side)
+        .map(|i| {
+            let x = (i % side) as f64 / side as f64;
+            // Source-leaning on the left, sink-leaning on the right, noisy.
+            ((1.0 - x) * rng.range(0.0, 4.0), x * rng.range(0.0, 4.0))
+        })
+        .collect();
+    let mut edges = Vec::new();
+    for y in 0..side {
+        for x in 0..side {
+            let i = y * side + x;
+            if x + 1 < side {
+                edges.push((i, i + 1, rng.range(0.5, 3.0)));
+            }
+            if y + 1 < side {
+                edges.push((i, i + side, rng.range(0.5, 3.0)));
+            }
+        }
+    }
+    (side * side, terminals, edges)
+}
+
+fn maxflow(c: &mut Criterion) {
+    let (n, terminals, edges) = grid(3);
+    let mut group = c.benchmark_group("maxflow_grid_100x100");
+    group.sample_size(10);
+    group.bench_function("boykov_kolmogorov", |b| {
+        b.iter(|| {
+            let mut flow = MaxFlow::new(n);
+            for (v, &(s, t)) in terminals.iter().enumerate() {
+                flow.add_terminal_weights(v, s, t).expect("valid");
+            }
+            for &(a, b, c) in &edges {
+                flow.add_edge(a, b, c, c).expect("valid");
+            }
+            black_box(flow.solve())
+        })
+    });
+    group.bench_function("baseline_petgraph_dinics", |b| {
+        b.iter(|| {
+            let mut graph = Graph::<(), f64>::with_capacity(n + 2, 2 * edges.len() + 2 * n);
+            let nodes: Vec<_> = (0..n + 2).map(|_| graph.add_node(())).collect();
+            for (v, &(s, t)) in terminals.iter().enumerate() {
+                graph.add_edge(nodes[n], nodes[v], s);
+                graph.add_edge(nodes[v], nodes[n + 1], t);
+            }
+            for &(a, b, c) in &edges {
+                graph.add_edge(nodes[a], nodes[b], c);
+                graph.add_edge(nodes[b], nodes[a], c);
+            }
+            black_box(petgraph::algo::dinics(&graph, nodes[n], nodes[n + 1]).0)
+        })
+    });
+    group.finish();
+}
+
+fn edits(c: &mut Criterion) {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let root = dir.path().join("plant");
+    let options = SynthOptions {
+        preset: Preset::Broadleaf,
+        seed: 21,
+        target_points: 120_000,
+        ..SynthOptions::default()
+    };
+    write_dataset(&options, &root, &NoProgress).expect("dataset");
+    let scene = Scene::open(&root).expect("scene");
+    let segmentation =
+        segment_scene(&scene, &SegmentOptions::default(), &NoProgress).expect("segmentation");
+    let mut session = Session::new(scene, segmentation);
+    // The leaf segment closest to 5,000 points, and the view that sees most of it.
+    let mut sizes = vec![0usize; session.segments().len()];
+    for &s in session.segment_of() {
+        if s >= 0 {
+            sizes[s as usize] += 1;
+        }
+    }
+    let segment = (0..sizes.len())
+        .filter(|&s| session.segments()[s].is_some_and(|st| st.label == SegmentLabel::Leaf))
+        .min_by_key(|&s| sizes[s].abs_diff(5_000))
+        .expect("a leaf segment");
+    let members = session.members(segment as u32);
+    let points = &session.segmentation().points;
+    let model = &session.scene().reconstruction;
+    let view = (0..model.images().len())
+        .max_by_key(|&v| {
+            members
+                .iter()
+                .filter(|&&p| points.views[p as usize].binary_search(&(v as u32)).is_ok())
+                .count()
+        })
+        .expect("a view");
+    let image = &model.images()[view];
+    let uv: Vec<nalgebra::Point2<f64>> = members
+        .iter()
+        .filter(|&&p| {
+            points.views[p as usize]
+                .binary_search(&(view as u32))
+                .is_ok()
+        })
+        .filter_map(|&p| model.project(image, &points.positions[p as usize]))
+        .collect();
+    let centre = uv.iter().fold(nalgebra::Point2::origin(), |a, p| {
+        a + p.coords / uv.len() as f64
+    });
+    let (lo_x, hi_x) = uv
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.x), b.max(p.x)));
+    let (lo_y, hi_y) = uv
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.y), b.max(p.y)));
+    eprintln!(
+        "segment {segment}: {} points, {} seen in view {view}",
+        members.len(),
+        uv.len()
+    );
+    // A vertical stroke through the segment's middle.
+    let split = Command::SplitByStroke {
+        image_id: image.id,
+        stroke: vec![[centre.x, lo_y - 10.0], [centre.x, hi_y + 10.0]],
+        closed: false,
+    };
+    let left = PixelRef {
+        image_id: image.id,
+        pixel: [lo_x + 0.1 * (hi_x - lo_x), centre.y],
+    };
+    let right = PixelRef {
+        image_id: image.id,
+        pixel: [hi_x - 0.1 * (hi_x - lo_x), centre.y],
+    };
+    let mut group = c.benchmark_group("edits_5k_point_segment");
+    group.sample_size(20);
+    group.bench_function("split_by_stroke", |b| {
+        b.iter(|| {
+            session.apply(split.clone()).expect("split");
+            session.undo();
+        })
+    });
+    session.apply(split.clone()).expect("split");
+    let merge = Command::MergeByClick {
+        first: left,
+        second: right,
+    };
+    group.bench_function("merge_by_click", |b| {
+        b.iter(|| {
+            session.apply(merge.clone()).expect("merge");
+            session.undo();
+        })
+    });
+    session.undo();
+    group.finish();
+
+    let mat = session.scene().load_image(image).expect("image");
+    let mut group = c.benchmark_group("boundary_800x600");
+    group.sample_size(10);
+    group.bench_function("oversegmentation_watershed", |b| {
+        b.iter(|| {
+            black_box(
+                Oversegmentation::compute(&mat, &BoundaryOptions::default()).expect("watershed"),
+            )
+        })
+    });
+    let superpixels =
+        Oversegmentation::compute(&mat, &BoundaryOptions::default()).expect("watershed");
+    eprintln!("{} superpixels", superpixels.len());
+    let all: Vec<(u32, nalgebra::Point2<f64>)> = (0..points.len())
+        .filter(|&p| points.views[p].binary_search(&(view as u32)).is_ok())
+        .filter_map(|p| {
+            model
+                .project(image, &points.positions[p])
+                .map(|uv| (p as u32, uv))
+        })
+        .collect();
+    let foreground: Vec<_> = all
+        .iter()
+        .filter(|(p, _)| session.segment_of()[*p as usize] == segment as i32)
+        .map(|x| x.1)
+        .collect();
+    let background: Vec<_> = all
+        .iter()
+        .filter(|(p, _)| session.segment_of()[*p as usize] != segment as i32)
+        .map(|x| x.1)
+        .collect();
+    group.bench_function("segment_boundary", |b| {
+        b.iter(|| {
+            black_box(
+                superpixels
+                    .boundary(&foreground, &background, &BoundaryOptions::default())
+                    .expect("boundary"),
+            )
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, maxflow, edits);
+criterion_main!(benches);
