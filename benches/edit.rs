@@ -102,8 +102,8 @@ fn edits(c: &mut Criterion) {
         .min_by_key(|&s| sizes[s].abs_diff(5_000))
         .expect("a leaf segment");
     let members = session.members(segment as u32);
-    let points = &session.segmentation().points;
-    let model = &session.scene().reconstruction;
+    let points = session.segmentation().points.clone();
+    let model = session.scene().reconstruction.clone();
     let view = (0..model.images().len())
         .max_by_key(|&v| {
             members
@@ -112,7 +112,8 @@ fn edits(c: &mut Criterion) {
                 .count()
         })
         .expect("a view");
-    let image = &model.images()[view];
+    let image = model.images()[view].clone();
+    let image = &image;
     let uv: Vec<nalgebra::Point2<f64>> = members
         .iter()
         .filter(|&&p| {
@@ -142,14 +143,20 @@ fn edits(c: &mut Criterion) {
         stroke: vec![[centre.x, lo_y - 10.0], [centre.x, hi_y + 10.0]],
         closed: false,
     };
-    let left = PixelRef {
-        image_id: image.id,
-        pixel: [lo_x + 0.1 * (hi_x - lo_x), centre.y],
+    // Clicks on the segment's leftmost and rightmost projected points (one on each side of
+    // the split stroke).
+    let extreme = |sign: f64| {
+        let p = uv
+            .iter()
+            .max_by(|a, b| (sign * a.x).total_cmp(&(sign * b.x)))
+            .expect("projected points");
+        PixelRef {
+            image_id: image.id,
+            pixel: [p.x, p.y],
+        }
     };
-    let right = PixelRef {
-        image_id: image.id,
-        pixel: [hi_x - 0.1 * (hi_x - lo_x), centre.y],
-    };
+    let (left, right) = (extreme(-1.0), extreme(1.0));
+    let _ = (lo_x, hi_x);
     let mut group = c.benchmark_group("edits_5k_point_segment");
     group.sample_size(20);
     group.bench_function("split_by_stroke", |b| {
@@ -159,9 +166,27 @@ fn edits(c: &mut Criterion) {
         })
     });
     session.apply(split.clone()).expect("split");
+    // Click one point of each of the two parts the split made.
+    let part_click = |session: &Session, target: i32, other: bool| {
+        members
+            .iter()
+            .filter(|&&p| {
+                points.views[p as usize]
+                    .binary_search(&(view as u32))
+                    .is_ok()
+            })
+            .find(|&&p| (session.segment_of()[p as usize] == target) != other)
+            .and_then(|&p| model.project(image, &points.positions[p as usize]))
+            .map(|uv| PixelRef {
+                image_id: image.id,
+                pixel: [uv.x, uv.y],
+            })
+            .expect("a visible point of each part")
+    };
+    let _ = (left, right);
     let merge = Command::MergeByClick {
-        first: left,
-        second: right,
+        first: part_click(&session, segment as i32, false),
+        second: part_click(&session, segment as i32, true),
     };
     group.bench_function("merge_by_click", |b| {
         b.iter(|| {

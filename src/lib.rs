@@ -8,6 +8,8 @@
 //!   normalized cuts, foreground separation).
 //! - [`edit`]: the editing session (commands, undo/redo, project files); [`segment`]: image
 //!   boundaries of segments.
+//! - [`leaf`]: the generic leaf and its fit to every leaf segment (seed 004 §6).
+//! - [`model`]: the plant model and its exports (glb, OBJ, segmentation.ply).
 //! - [`mesh`], [`branch`]: triangle meshes and generalized cylinders shared by every stage.
 //! - [`render`]: the headless wgpu render core.
 //! - [`synth`]: synthetic plants with ground truth; [`eval`]: scoring reconstructions.
@@ -17,6 +19,7 @@ pub mod branch;
 pub mod edit;
 pub mod eval;
 pub mod graph;
+pub mod leaf;
 pub mod mesh;
 pub mod model;
 pub mod render;

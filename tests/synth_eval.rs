@@ -132,7 +132,7 @@ fn score_prediction(relabel: impl Fn(usize, i64) -> i64) -> EvalReport {
             double_sided: true,
         })
         .collect();
-    std::fs::write(out.path().join("plant.glb"), write_glb(&nodes, "test")).unwrap();
+    std::fs::write(out.path().join("plant.glb"), write_glb(&nodes, &[], "test")).unwrap();
     let prediction = Prediction::load(out.path()).unwrap();
     evaluate(&truth, &prediction, None, &EvalOptions::default()).unwrap()
 }

@@ -83,7 +83,8 @@ enum Command {
         #[command(flatten)]
         params: SegmentArgs,
     },
-    /// Reconstruct a plant from a COLMAP folder (today: foreground and leaf segmentation).
+    /// Reconstruct a plant from a COLMAP folder: foreground, segmentation, image boundaries,
+    /// leaf fitting, export (plant.glb, plant.obj, segmentation.ply, report.json).
     Reconstruct {
         #[command(flatten)]
         scene: SceneArgs,
@@ -91,6 +92,10 @@ enum Command {
         out: PathBuf,
         #[command(flatten)]
         params: SegmentArgs,
+        /// Leaf fitting: `full` (flat fit, boundary warp, deformation), `no-warp` (no affine
+        /// ICP to the image boundary) or `flat` (PCA plane and scaling only).
+        #[arg(long, value_enum, default_value = "full")]
+        fit: FitMode,
     },
     /// Re-apply a project's edits headlessly and write the resulting segmentation.
     Replay {
@@ -207,6 +212,13 @@ struct SceneArgs {
     /// Explicit images folder (with --model, or to override the one found).
     #[arg(long)]
     images: Option<PathBuf>,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum FitMode {
+    Full,
+    NoWarp,
+    Flat,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -398,22 +410,97 @@ fn run_segmentation(
     Ok((scene, segmentation))
 }
 
-fn reconstruct(scene_args: &SceneArgs, params: &SegmentArgs, out: &Path) -> Result<()> {
+fn reconstruct(
+    scene_args: &SceneArgs,
+    params: &SegmentArgs,
+    fit: FitMode,
+    out: &Path,
+) -> Result<()> {
     let started = std::time::Instant::now();
     let (scene, segmentation) = run_segmentation(scene_args, params, out)?;
+    let segmentation_summary = serde_json::to_value(&segmentation)?;
+    let class_counts = segmentation.class_counts();
+    let input = scene.source.model_dir.clone();
+    let mut session = frond::edit::Session::new(scene, segmentation);
+    let mut options = frond::leaf::LeafOptions::default();
+    match fit {
+        FitMode::Full => {}
+        FitMode::NoWarp => options.fit.use_boundary = false,
+        FitMode::Flat => {
+            options.fit.use_boundary = false;
+            options.fit.deform = false;
+        }
+    }
+    let progress = BarProgress::new();
+    let leaves = frond::leaf::reconstruct_leaves(&mut session, &options, &progress)
+        .context("reconstructing leaves")?;
+    progress.bar.finish_and_clear();
+    let model = frond::model::PlantModel {
+        leaves: leaves
+            .leaves
+            .iter()
+            .map(|l| frond::model::ModelLeaf {
+                id: l.segment,
+                mesh: l.fit.mesh.clone(),
+                texture: l.fit.texture.clone(),
+            })
+            .collect(),
+        branches: Vec::new(),
+    };
+    let clock = std::time::Instant::now();
+    let export = model
+        .export(out)
+        .with_context(|| format!("exporting the plant model to {}", out.display()))?;
+    session
+        .write_outputs(out)
+        .with_context(|| format!("writing the segmentation to {}", out.display()))?;
+    let export_seconds = clock.elapsed().as_secs_f64();
+    eprintln!(
+        "{} leaves fitted ({} skipped), {} triangles -> {}",
+        leaves.leaves.len(),
+        leaves.skipped.len(),
+        export.triangles,
+        out.display()
+    );
+    let t = &leaves.timings;
+    eprintln!(
+        "timings: generic leaf {:.2} s, boundaries {:.2} s, fitting {:.2} s, export {:.2} s",
+        t.template, t.boundaries, t.fitting, export_seconds
+    );
     let report = serde_json::json!({
         "frond": env!("CARGO_PKG_VERSION"),
-        "input": scene.source.model_dir,
-        "stages": ["foreground", "segmentation"],
-        "points": segmentation.points.len(),
-        "foreground": segmentation.class_counts(),
-        "segments": segmentation.segments.len(),
-        "leaves": segmentation.num_leaves(),
-        "parameters": segmentation.options,
+        "input": input,
+        "stages": ["foreground", "segmentation", "boundaries", "leaves", "export"],
+        "counts": {
+            "points": session.segmentation().points.len(),
+            "foreground": class_counts,
+            "segments": session.segments().iter().flatten().count(),
+            "leaves_fitted": leaves.leaves.len(),
+            "leaves_skipped": leaves.skipped.len(),
+            "triangles": export.triangles,
+            "atlas_pages": export.atlas_pages,
+        },
+        "template": leaves.template_source,
+        "skipped": leaves.skipped,
+        "leaves": leaves.leaves.iter().map(|l| serde_json::json!({
+            "segment": l.segment,
+            "view": l.view.map(|v| session.scene().reconstruction.images()[v].id),
+            "points": l.fit.points,
+            "point_residual": l.fit.point_residual,
+            "length": l.fit.length,
+            "area": l.fit.area,
+            "icp": l.fit.icp,
+            "textured_fraction": l.fit.textured_fraction,
+            "notes": l.fit.notes,
+        })).collect::<Vec<_>>(),
+        "parameters": {"segmentation": session.segmentation().options, "leaves": options},
+        "segmentation": segmentation_summary,
         "timings": {
-            "segmentation": segmentation.timings,
+            "leaves": leaves.timings,
+            "export": export_seconds,
             "total": started.elapsed().as_secs_f64(),
         },
+        "files": export.files,
     });
     let path = out.join("report.json");
     frond::util::atomic::write_atomic(&path, serde_json::to_string_pretty(&report)?.as_bytes())
@@ -489,7 +576,12 @@ fn main() -> Result<()> {
             *preset, *seed, *views, *size, *points, *noise, *outliers, *no_points, out,
         ),
         Command::Segment { scene, out, params } => run_segmentation(scene, params, out).map(|_| ()),
-        Command::Reconstruct { scene, out, params } => reconstruct(scene, params, out),
+        Command::Reconstruct {
+            scene,
+            out,
+            params,
+            fit,
+        } => reconstruct(scene, params, *fit, out),
         Command::Replay { project, out } => replay(project, out.as_deref()),
         Command::Eval {
             gt,

@@ -13,11 +13,12 @@ use serde_json::{Value, json};
 
 use crate::mesh::TriMesh;
 
-/// A mesh to export, with an optional base-colour texture.
+/// A mesh to export, with an optional base-colour texture (an index into the textures given
+/// to [`write_glb`], so that leaves can share an atlas page).
 pub struct ExportNode<'a> {
     pub name: String,
     pub mesh: &'a TriMesh,
-    pub texture: Option<&'a RgbaImage>,
+    pub texture: Option<usize>,
     /// Base colour when there is no texture (linear RGBA).
     pub color: [f32; 4],
     pub double_sided: bool,
@@ -119,8 +120,8 @@ fn png_bytes(image: &RgbaImage) -> Vec<u8> {
     out
 }
 
-/// Encodes nodes as a glb.
-pub fn write_glb(nodes: &[ExportNode<'_>], generator: &str) -> Vec<u8> {
+/// Encodes nodes as a glb; `textures` are embedded once each as PNG.
+pub fn write_glb(nodes: &[ExportNode<'_>], textures: &[&RgbaImage], generator: &str) -> Vec<u8> {
     let mut buffer = BinaryBuffer {
         bytes: Vec::new(),
         views: Vec::new(),
@@ -128,9 +129,14 @@ pub fn write_glb(nodes: &[ExportNode<'_>], generator: &str) -> Vec<u8> {
     };
     let mut meshes = Vec::new();
     let mut materials = Vec::new();
-    let mut textures = Vec::new();
+    let mut gltf_textures = Vec::new();
     let mut images = Vec::new();
     let mut gltf_nodes = Vec::new();
+    for texture in textures {
+        let view = buffer.view(&png_bytes(texture), None);
+        images.push(json!({"bufferView": view, "mimeType": "image/png"}));
+        gltf_textures.push(json!({"source": images.len() - 1, "sampler": 0}));
+    }
     for node in nodes {
         let mesh = node.mesh;
         if mesh.is_empty() {
@@ -156,12 +162,8 @@ pub fn write_glb(nodes: &[ExportNode<'_>], generator: &str) -> Vec<u8> {
                 "roughnessFactor": 0.85
             }
         });
-        if let Some(texture) = node.texture {
-            let view = buffer.view(&png_bytes(texture), None);
-            images.push(json!({"bufferView": view, "mimeType": "image/png"}));
-            textures.push(json!({"source": images.len() - 1, "sampler": 0}));
-            material["pbrMetallicRoughness"]["baseColorTexture"] =
-                json!({"index": textures.len() - 1});
+        if let Some(texture) = node.texture.filter(|&t| t < gltf_textures.len()) {
+            material["pbrMetallicRoughness"]["baseColorTexture"] = json!({"index": texture});
             material["pbrMetallicRoughness"]["baseColorFactor"] = json!([1.0, 1.0, 1.0, 1.0]);
         }
         materials.push(material);
@@ -190,8 +192,8 @@ pub fn write_glb(nodes: &[ExportNode<'_>], generator: &str) -> Vec<u8> {
         document["bufferViews"] = json!(buffer.views);
         document["buffers"] = json!([{"byteLength": buffer.bytes.len()}]);
     }
-    if !textures.is_empty() {
-        document["textures"] = json!(textures);
+    if !gltf_textures.is_empty() {
+        document["textures"] = json!(gltf_textures);
         document["images"] = json!(images);
         document["samplers"] =
             json!([{"magFilter": 9729, "minFilter": 9987, "wrapS": 10497, "wrapT": 10497}]);
@@ -335,7 +337,7 @@ mod tests {
             ExportNode {
                 name: "leaf_000".into(),
                 mesh: &mesh,
-                texture: Some(&texture),
+                texture: Some(0),
                 color: [1.0; 4],
                 double_sided: true,
             },
@@ -347,7 +349,7 @@ mod tests {
                 double_sided: false,
             },
         ];
-        let bytes = write_glb(&nodes, "frond test");
+        let bytes = write_glb(&nodes, &[&texture], "frond test");
         assert_eq!(&bytes[0..4], b"glTF");
         assert_eq!(
             u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize,

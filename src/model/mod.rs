@@ -3,6 +3,9 @@
 //! `leaf_NNN` and `branch_NNN` with identity transforms, positions in the input's world frame.
 
 pub mod gltf;
+pub mod plant;
+
+pub use plant::{ExportReport, ModelBranch, ModelLeaf, PlantModel};
 
 use std::path::Path;
 

@@ -1,0 +1,717 @@
+//! Fitting the generic leaf to one segment (seed 004 §6.2): flat fit by PCA and scaling,
+//! orientation (facing up and away from the plant's axis, base toward the stem), boundary
+//! warp by affine ICP against the back-projected image boundary, deformation out of the plane
+//! toward the points, and texture from the best view.
+
+use nalgebra::{Matrix2, Matrix3, Point2, Point3, Vector2, Vector3};
+use serde::Serialize;
+
+use super::template::LeafTemplate;
+use crate::graph::shape::Shape;
+use crate::mesh::TriMesh;
+
+/// Fitting settings.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct LeafFitOptions {
+    /// Register the outline to the image boundary (affine ICP).
+    pub use_boundary: bool,
+    /// Bend the leaf out of its plane toward the points.
+    pub deform: bool,
+    /// ICP stops when the mean distance falls below this fraction of the leaf length…
+    pub icp_tolerance: f64,
+    /// …or after this many iterations.
+    pub icp_iterations: usize,
+    /// Texture tile size (texels).
+    pub texture_size: u32,
+}
+
+impl Default for LeafFitOptions {
+    fn default() -> Self {
+        Self {
+            use_boundary: true,
+            deform: true,
+            icp_tolerance: 0.004,
+            icp_iterations: 40,
+            texture_size: 128,
+        }
+    }
+}
+
+/// Why a segment got no leaf.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FitError {
+    #[error("{0} points: too few to pose a leaf (left for the branch stage)")]
+    TooFewPoints(usize),
+    #[error("the points are collinear or coincident: no leaf plane")]
+    Degenerate,
+}
+
+/// The leaf's frame: origin at the points' centroid, x from base to tip, z the normal.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct LeafFrame {
+    pub origin: Point3<f64>,
+    pub x_axis: Vector3<f64>,
+    pub y_axis: Vector3<f64>,
+    pub normal: Vector3<f64>,
+}
+
+impl LeafFrame {
+    pub fn to_plane(&self, p: &Point3<f64>) -> (Point2<f64>, f64) {
+        let d = p - self.origin;
+        (
+            Point2::new(d.dot(&self.x_axis), d.dot(&self.y_axis)),
+            d.dot(&self.normal),
+        )
+    }
+
+    pub fn to_world(&self, q: &Point2<f64>, height: f64) -> Point3<f64> {
+        self.origin + self.x_axis * q.x + self.y_axis * q.y + self.normal * height
+    }
+}
+
+/// Where the plant is, for the orientation heuristic.
+#[derive(Clone, Debug)]
+pub struct PlantContext {
+    pub up: Vector3<f64>,
+    /// A point on the plant's vertical axis.
+    pub axis_point: Point3<f64>,
+}
+
+/// A segment's image boundary in a view, for the boundary warp and the texture.
+pub struct BoundaryView<'a> {
+    /// Boundary polygon in pixels (COLMAP convention).
+    pub polygon: &'a [[f64; 2]],
+    pub camera: &'a crate::scene::Camera,
+    pub camera_from_world: nalgebra::Isometry3<f64>,
+    /// The photo, RGB.
+    pub image: Option<&'a image::RgbImage>,
+}
+
+/// A smooth height field `h(x, y)` over the leaf plane: least-squares polynomial (planar,
+/// quadratic or cubic by the number of points) with Huber reweighting, so outliers make no
+/// spikes; evaluated values are clamped to the observed range plus a margin.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct HeightField {
+    coefficients: Vec<f64>,
+    scale: f64,
+    min: f64,
+    max: f64,
+}
+
+fn monomials(u: f64, v: f64, terms: usize) -> [f64; 10] {
+    let all = [
+        1.0,
+        u,
+        v,
+        u * u,
+        u * v,
+        v * v,
+        u * u * u,
+        u * u * v,
+        u * v * v,
+        v * v * v,
+    ];
+    let mut out = [0.0; 10];
+    out[..terms].copy_from_slice(&all[..terms]);
+    out
+}
+
+impl HeightField {
+    pub fn flat() -> Self {
+        Self {
+            coefficients: vec![0.0],
+            scale: 1.0,
+            min: 0.0,
+            max: 0.0,
+        }
+    }
+
+    /// Fits `h` to samples `(x, y, h)`; `scale` normalises coordinates (the leaf length).
+    pub fn fit(samples: &[(Point2<f64>, f64)], scale: f64) -> Self {
+        let terms = match samples.len() {
+            0..=9 => 1,
+            10..=39 => 6,
+            _ => 10,
+        };
+        if terms == 1 {
+            return Self::flat();
+        }
+        let scale = scale.max(1e-9);
+        let mut weights = vec![1.0; samples.len()];
+        let mut coefficients = vec![0.0; terms];
+        for _ in 0..3 {
+            let mut a = nalgebra::DMatrix::<f64>::zeros(terms, terms);
+            let mut b = nalgebra::DVector::<f64>::zeros(terms);
+            for ((q, h), w) in samples.iter().zip(&weights) {
+                let m = monomials(q.x / scale, q.y / scale, terms);
+                for i in 0..terms {
+                    b[i] += w * m[i] * h;
+                    for j in 0..terms {
+                        a[(i, j)] += w * m[i] * m[j];
+                    }
+                }
+            }
+            for i in 0..terms {
+                a[(i, i)] += 1e-9;
+            }
+            let Some(solution) = a.cholesky().map(|c| c.solve(&b)) else {
+                return Self::flat();
+            };
+            coefficients = solution.iter().copied().collect();
+            // Huber weights from the residuals' robust scale.
+            let residuals: Vec<f64> = samples
+                .iter()
+                .map(|(q, h)| {
+                    let m = monomials(q.x / scale, q.y / scale, terms);
+                    h - (0..terms).map(|i| coefficients[i] * m[i]).sum::<f64>()
+                })
+                .collect();
+            let mut absolute: Vec<f64> = residuals.iter().map(|r| r.abs()).collect();
+            absolute.sort_by(f64::total_cmp);
+            let sigma = 1.4826 * absolute[absolute.len() / 2] + 1e-12;
+            for (w, r) in weights.iter_mut().zip(&residuals) {
+                let k = 1.5 * sigma;
+                *w = if r.abs() <= k { 1.0 } else { k / r.abs() };
+            }
+        }
+        let heights: Vec<f64> = samples.iter().map(|s| s.1).collect();
+        let (min, max) = heights
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &h| {
+                (a.min(h), b.max(h))
+            });
+        let margin = 0.05 * scale;
+        Self {
+            coefficients,
+            scale,
+            min: min - margin,
+            max: max + margin,
+        }
+    }
+
+    pub fn at(&self, q: &Point2<f64>) -> f64 {
+        let terms = self.coefficients.len();
+        let m = monomials(q.x / self.scale, q.y / self.scale, terms);
+        let h: f64 = (0..terms).map(|i| self.coefficients[i] * m[i]).sum();
+        h.clamp(self.min.min(0.0), self.max.max(0.0))
+    }
+}
+
+/// A 2D affine map `q = M p + t` (template → leaf plane).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Affine2 {
+    pub matrix: Matrix2<f64>,
+    pub translation: Vector2<f64>,
+}
+
+impl Affine2 {
+    pub fn apply(&self, p: &Point2<f64>) -> Point2<f64> {
+        Point2::from(self.matrix * p.coords + self.translation)
+    }
+
+    /// Least-squares affine map taking `from[i]` to `to[i]`.
+    pub fn fit(from: &[Point2<f64>], to: &[Point2<f64>]) -> Option<Self> {
+        if from.len() < 3 {
+            return None;
+        }
+        // Solve for rows of [M | t] with normal equations on (x, y, 1).
+        let mut ata = Matrix3::zeros();
+        let mut atx = Vector3::zeros();
+        let mut aty = Vector3::zeros();
+        for (p, q) in from.iter().zip(to) {
+            let row = Vector3::new(p.x, p.y, 1.0);
+            ata += row * row.transpose();
+            atx += row * q.x;
+            aty += row * q.y;
+        }
+        let inverse = ata.try_inverse()?;
+        let (rx, ry) = (inverse * atx, inverse * aty);
+        let matrix = Matrix2::new(rx.x, rx.y, ry.x, ry.y);
+        let affine = Self {
+            matrix,
+            translation: Vector2::new(rx.z, ry.z),
+        };
+        (affine.matrix.determinant() > 1e-12 && affine.matrix.iter().all(|v| v.is_finite()))
+            .then_some(affine)
+    }
+}
+
+/// Closest point on a closed polyline.
+fn closest_on_loop(p: &Point2<f64>, polygon: &[Point2<f64>]) -> Point2<f64> {
+    let mut best = (f64::INFINITY, polygon[0]);
+    for i in 0..polygon.len() {
+        let (a, b) = (polygon[i], polygon[(i + 1) % polygon.len()]);
+        let ab = b - a;
+        let t = if ab.norm_squared() < 1e-24 {
+            0.0
+        } else {
+            ((p - a).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0)
+        };
+        let c = a + ab * t;
+        let d = (p - c).norm_squared();
+        if d < best.0 {
+            best = (d, c);
+        }
+    }
+    best.1
+}
+
+/// Outcome of the boundary registration.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct IcpReport {
+    pub iterations: usize,
+    /// Mean symmetric distance between the warped outline and the boundary, relative to the
+    /// leaf length, before and after.
+    pub initial_distance: f64,
+    pub final_distance: f64,
+}
+
+/// Affine ICP of two closed curves (Besl & McKay 1992, for curves): correspondences both ways
+/// (outline → nearest boundary point and boundary → nearest outline point), least-squares
+/// affine update, until the mean distance falls below the tolerance or stops improving.
+pub fn register_outline(
+    template_outline: &[Point2<f64>],
+    boundary: &[Point2<f64>],
+    initial: Affine2,
+    length: f64,
+    options: &LeafFitOptions,
+) -> (Affine2, IcpReport) {
+    let mut current = initial;
+    let mean_distance = |affine: &Affine2| {
+        let warped: Vec<Point2<f64>> = template_outline.iter().map(|p| affine.apply(p)).collect();
+        let forward: f64 = warped
+            .iter()
+            .map(|q| (q - closest_on_loop(q, boundary)).norm())
+            .sum::<f64>()
+            / warped.len() as f64;
+        let backward: f64 = boundary
+            .iter()
+            .map(|b| (b - closest_on_loop(b, &warped)).norm())
+            .sum::<f64>()
+            / boundary.len() as f64;
+        0.5 * (forward + backward) / length.max(1e-12)
+    };
+    let initial_distance = mean_distance(&current);
+    let mut distance = initial_distance;
+    let mut iterations = 0;
+    while iterations < options.icp_iterations && distance > options.icp_tolerance {
+        iterations += 1;
+        let warped: Vec<Point2<f64>> = template_outline.iter().map(|p| current.apply(p)).collect();
+        let mut from = Vec::with_capacity(template_outline.len() + boundary.len());
+        let mut to = Vec::with_capacity(from.capacity());
+        for (p, q) in template_outline.iter().zip(&warped) {
+            from.push(*p);
+            to.push(closest_on_loop(q, boundary));
+        }
+        // Boundary → outline: find the template point whose warped image is nearest.
+        for b in boundary {
+            if let Some((i, _)) = warped.iter().enumerate().min_by(|x, y| {
+                (x.1 - b)
+                    .norm_squared()
+                    .total_cmp(&(y.1 - b).norm_squared())
+            }) {
+                from.push(template_outline[i]);
+                to.push(*b);
+            }
+        }
+        let Some(next) = Affine2::fit(&from, &to) else {
+            break;
+        };
+        let next_distance = mean_distance(&next);
+        if next_distance >= distance - 1e-6 {
+            if next_distance < distance {
+                current = next;
+                distance = next_distance;
+            }
+            break;
+        }
+        current = next;
+        distance = next_distance;
+    }
+    (
+        current,
+        IcpReport {
+            iterations,
+            initial_distance,
+            final_distance: distance,
+        },
+    )
+}
+
+/// A fitted leaf.
+#[derive(Clone, Debug, Serialize)]
+pub struct FittedLeaf {
+    pub frame: LeafFrame,
+    pub affine: Affine2,
+    pub heights: HeightField,
+    /// The leaf surface in world coordinates; uvs span this leaf's texture tile [0, 1]².
+    #[serde(skip)]
+    pub mesh: TriMesh,
+    #[serde(skip)]
+    pub texture: image::RgbaImage,
+    pub points: usize,
+    /// RMS distance of the points to the fitted surface (metres).
+    pub point_residual: f64,
+    pub icp: Option<IcpReport>,
+    /// Length of the leaf along its midrib in the plane (metres).
+    pub length: f64,
+    pub area: f64,
+    /// Share of texels taken from the photo (the rest inherit the generic texture).
+    pub textured_fraction: f64,
+    pub notes: Vec<String>,
+}
+
+fn percentile(values: &mut [f64], q: f64) -> f64 {
+    values.sort_by(f64::total_cmp);
+    values[((values.len() - 1) as f64 * q).round() as usize]
+}
+
+/// Intersects the viewing ray of a pixel with the leaf plane; `None` for rays nearly parallel
+/// to the plane or hitting it behind the camera.
+fn back_project(
+    pixel: &Point2<f64>,
+    view: &BoundaryView<'_>,
+    frame: &LeafFrame,
+) -> Option<Point2<f64>> {
+    let ray_camera = view.camera.unproject(pixel)?;
+    let world_from_camera = view.camera_from_world.inverse();
+    let origin = world_from_camera * Point3::origin();
+    let direction = (world_from_camera.rotation * ray_camera).normalize();
+    let denominator = direction.dot(&frame.normal);
+    if denominator.abs() < 0.15 {
+        return None;
+    }
+    let t = (frame.origin - origin).dot(&frame.normal) / denominator;
+    (t > 0.0).then(|| frame.to_plane(&(origin + direction * t)).0)
+}
+
+fn sample_rgb(image: &image::RgbImage, pixel: &Point2<f64>) -> Option<[u8; 3]> {
+    // COLMAP pixel centres are at +0.5: bilinear interpolation between centres.
+    let (x, y) = (pixel.x - 0.5, pixel.y - 0.5);
+    if x < 0.0 || y < 0.0 || x >= (image.width() - 1) as f64 || y >= (image.height() - 1) as f64 {
+        return None;
+    }
+    let (x0, y0) = (x.floor() as u32, y.floor() as u32);
+    let (fx, fy) = (x - x0 as f64, y - y0 as f64);
+    let mut out = [0.0f64; 3];
+    for (dx, dy, w) in [
+        (0, 0, (1.0 - fx) * (1.0 - fy)),
+        (1, 0, fx * (1.0 - fy)),
+        (0, 1, (1.0 - fx) * fy),
+        (1, 1, fx * fy),
+    ] {
+        let p = image.get_pixel(x0 + dx, y0 + dy);
+        for c in 0..3 {
+            out[c] += w * p[c] as f64;
+        }
+    }
+    Some(out.map(|v| v.round().clamp(0.0, 255.0) as u8))
+}
+
+fn inside_polygon(p: &Point2<f64>, polygon: &[[f64; 2]]) -> bool {
+    let mut inside = false;
+    let n = polygon.len();
+    for i in 0..n {
+        let (a, b) = (polygon[i], polygon[(i + 1) % n]);
+        if (a[1] > p.y) != (b[1] > p.y) {
+            let x = a[0] + (p.y - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
+            if p.x < x {
+                inside = !inside;
+            }
+        }
+    }
+    inside
+}
+
+/// The frame of a point group: PCA axes, normal facing up and away from the plant's axis, x
+/// from the end nearer the plant's axis (the base, where a leaf meets its stem) to the other.
+pub fn leaf_frame(
+    points: &[Point3<f64>],
+    plant: &PlantContext,
+) -> Result<(LeafFrame, Shape), FitError> {
+    if points.len() < 3 {
+        return Err(FitError::TooFewPoints(points.len()));
+    }
+    let shape = Shape::of(points.iter().copied());
+    if shape.eigenvalues[1] <= 1e-14 * shape.eigenvalues[0].max(1e-300)
+        || shape.eigenvalues[0] <= 0.0
+    {
+        return Err(FitError::Degenerate);
+    }
+    let horizontal = |p: &Point3<f64>| {
+        let d = p - plant.axis_point;
+        d - plant.up * plant.up.dot(&d)
+    };
+    let outward = horizontal(&shape.centroid)
+        .try_normalize(1e-9)
+        .unwrap_or_else(Vector3::zeros);
+    let mut normal = shape.normal();
+    if normal.dot(&(plant.up + outward)) < 0.0 {
+        normal = -normal;
+    }
+    let mut x_axis = shape.axes[0];
+    // The base is the end nearer the plant's axis.
+    let mut along: Vec<f64> = points
+        .iter()
+        .map(|p| (p - shape.centroid).dot(&x_axis))
+        .collect();
+    let lo = percentile(&mut along, 0.02);
+    let hi = percentile(&mut along, 0.98);
+    let end_lo = shape.centroid + x_axis * lo;
+    let end_hi = shape.centroid + x_axis * hi;
+    if horizontal(&end_hi).norm() < horizontal(&end_lo).norm() {
+        x_axis = -x_axis;
+    }
+    let y_axis = normal.cross(&x_axis).normalize();
+    let x_axis = y_axis.cross(&normal).normalize();
+    Ok((
+        LeafFrame {
+            origin: shape.centroid,
+            x_axis,
+            y_axis,
+            normal,
+        },
+        shape,
+    ))
+}
+
+/// Fits the template to a segment's points (and its boundary view when given).
+pub fn fit_leaf(
+    points: &[Point3<f64>],
+    template: &LeafTemplate,
+    plant: &PlantContext,
+    boundary: Option<&BoundaryView<'_>>,
+    options: &LeafFitOptions,
+) -> Result<FittedLeaf, FitError> {
+    let (frame, _) = leaf_frame(points, plant)?;
+    let mut notes = Vec::new();
+    let samples: Vec<(Point2<f64>, f64)> = points.iter().map(|p| frame.to_plane(p)).collect();
+    // Flat fit: scale the template to the points' extent along the two axes.
+    let mut xs: Vec<f64> = samples.iter().map(|s| s.0.x).collect();
+    let mut ys: Vec<f64> = samples.iter().map(|s| s.0.y).collect();
+    let (x_lo, x_hi) = (percentile(&mut xs, 0.01), percentile(&mut xs, 0.99));
+    let (y_lo, y_hi) = (percentile(&mut ys, 0.01), percentile(&mut ys, 0.99));
+    // Extend by half the mean point spacing: points stop short of the margin.
+    let area_estimate = (x_hi - x_lo).max(1e-9) * (y_hi - y_lo).max(1e-9) * 0.7;
+    let half_spacing = 0.5 * (area_estimate / points.len() as f64).sqrt();
+    let (x_lo, x_hi, y_lo, y_hi) = (
+        x_lo - half_spacing,
+        x_hi + half_spacing,
+        y_lo - half_spacing,
+        y_hi + half_spacing,
+    );
+    let template_width = template.texture_max.y - template.texture_min.y;
+    let scale_x = x_hi - x_lo;
+    let scale_y = (y_hi - y_lo) / template_width.max(1e-9);
+    let template_mid_y = 0.5 * (template.texture_min.y + template.texture_max.y);
+    let mut affine = Affine2 {
+        matrix: Matrix2::new(scale_x, 0.0, 0.0, scale_y),
+        translation: Vector2::new(x_lo, 0.5 * (y_lo + y_hi) - scale_y * template_mid_y),
+    };
+    let length = scale_x;
+
+    // Boundary warp: register the outline to the back-projected image boundary.
+    let mut icp = None;
+    if options.use_boundary
+        && let Some(view) = boundary
+    {
+        let projected: Vec<Point2<f64>> = view
+            .polygon
+            .iter()
+            .filter_map(|p| back_project(&Point2::new(p[0], p[1]), view, &frame))
+            .collect();
+        if projected.len() >= 8 && projected.len() * 10 >= view.polygon.len() * 8 {
+            let dense = super::template::resample(
+                &{
+                    let mut closed = projected.clone();
+                    closed.push(projected[0]);
+                    closed
+                },
+                150,
+            );
+            let outline = template.dense_outline(120);
+            let (registered, report) = register_outline(&outline, &dense, affine, length, options);
+            let area_ratio = registered.matrix.determinant() / affine.matrix.determinant();
+            if (0.33..=3.0).contains(&area_ratio)
+                && report.final_distance <= report.initial_distance
+            {
+                affine = registered;
+                icp = Some(report);
+            } else {
+                notes.push(format!("boundary warp rejected (area ×{area_ratio:.2})"));
+            }
+        } else {
+            notes.push("boundary view too oblique for the warp".into());
+        }
+    }
+
+    // Deformation perpendicular to the plane toward the points.
+    let heights = if options.deform {
+        HeightField::fit(&samples, length)
+    } else {
+        HeightField::flat()
+    };
+    let point_residual = (samples
+        .iter()
+        .map(|(q, h)| (h - heights.at(q)).powi(2))
+        .sum::<f64>()
+        / samples.len() as f64)
+        .sqrt();
+
+    // Mesh: resolution from the point density.
+    let along = ((points.len() as f64).sqrt() * 1.2).clamp(6.0, 30.0) as usize;
+    let across = if along > 14 { 9 } else { 7 };
+    let (mut mesh, flat) = template.mesh(along, across);
+    for (vertex, p) in mesh.positions.iter_mut().zip(&flat) {
+        let q = affine.apply(p);
+        *vertex = frame.to_world(&q, heights.at(&q)).cast::<f32>();
+    }
+    mesh.compute_normals();
+
+    // Texture: the photo where the boundary region sees the leaf, else the generic texture.
+    let size = options.texture_size.max(8);
+    let mut texture = image::RgbaImage::new(size, size);
+    let mut from_photo = 0usize;
+    let extent = template.texture_max - template.texture_min;
+    for j in 0..size {
+        for i in 0..size {
+            let u = (i as f64 + 0.5) / size as f64;
+            let v = (j as f64 + 0.5) / size as f64;
+            let p = Point2::new(
+                template.texture_min.x + u * extent.x,
+                template.texture_max.y - v * extent.y,
+            );
+            let generic = {
+                let (w, h) = template.texture.dimensions();
+                if w == 0 || h == 0 {
+                    image::Rgba([70, 130, 55, 255])
+                } else {
+                    *template.texture.get_pixel(
+                        ((u * w as f64) as u32).min(w - 1),
+                        ((v * h as f64) as u32).min(h - 1),
+                    )
+                }
+            };
+            let mut texel = image::Rgba([generic[0], generic[1], generic[2], 255]);
+            if let Some(view) = boundary
+                && let Some(photo) = view.image
+            {
+                let q = affine.apply(&p);
+                let world = frame.to_world(&q, heights.at(&q));
+                let camera_point = view.camera_from_world * world;
+                if let Some(pixel) = view.camera.project(&camera_point.coords)
+                    && inside_polygon(&pixel, view.polygon)
+                    && let Some(rgb) = sample_rgb(photo, &pixel)
+                {
+                    texel = image::Rgba([rgb[0], rgb[1], rgb[2], 255]);
+                    from_photo += 1;
+                }
+            }
+            texture.put_pixel(i, j, texel);
+        }
+    }
+    let area = mesh.area();
+    Ok(FittedLeaf {
+        frame,
+        affine,
+        heights,
+        mesh,
+        texture,
+        points: points.len(),
+        point_residual,
+        icp,
+        length,
+        area,
+        textured_fraction: from_photo as f64 / (size * size) as f64,
+        notes,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::util::rng::Rng;
+
+    #[test]
+    fn affine_fit_recovers_a_map() {
+        let truth = Affine2 {
+            matrix: Matrix2::new(2.0, 0.3, -0.2, 0.7),
+            translation: Vector2::new(1.0, -3.0),
+        };
+        let from: Vec<Point2<f64>> = (0..20)
+            .map(|k| Point2::new((k as f64).sin(), (k as f64 * 0.7).cos()))
+            .collect();
+        let to: Vec<Point2<f64>> = from.iter().map(|p| truth.apply(p)).collect();
+        let found = Affine2::fit(&from, &to).unwrap();
+        assert!((found.matrix - truth.matrix).norm() < 1e-9);
+        assert!((found.translation - truth.translation).norm() < 1e-9);
+    }
+
+    #[test]
+    fn icp_registers_a_scaled_ellipse() {
+        let outline: Vec<Point2<f64>> = (0..120)
+            .map(|k| {
+                let t = std::f64::consts::TAU * k as f64 / 120.0;
+                Point2::new(0.5 + 0.5 * t.cos(), 0.2 * t.sin())
+            })
+            .collect();
+        let truth = Affine2 {
+            matrix: Matrix2::new(0.12, 0.01, -0.005, 0.09),
+            translation: Vector2::new(-0.05, 0.01),
+        };
+        let boundary: Vec<Point2<f64>> = (0..150)
+            .map(|k| {
+                let t = std::f64::consts::TAU * (k as f64 + 0.3) / 150.0;
+                truth.apply(&Point2::new(0.5 + 0.5 * t.cos(), 0.2 * t.sin()))
+            })
+            .collect();
+        let initial = Affine2 {
+            matrix: Matrix2::new(0.1, 0.0, 0.0, 0.1),
+            translation: Vector2::new(-0.04, 0.0),
+        };
+        let (found, report) = register_outline(
+            &outline,
+            &boundary,
+            initial,
+            0.12,
+            &LeafFitOptions::default(),
+        );
+        assert!(report.final_distance < 0.01, "{report:?}");
+        assert!(report.final_distance < report.initial_distance);
+        let corner = Point2::new(1.0, 0.0);
+        assert!((found.apply(&corner) - truth.apply(&corner)).norm() < 0.004);
+    }
+
+    #[test]
+    fn height_field_ignores_an_outlier_and_follows_a_bend() {
+        let mut rng = Rng::seed_from(2);
+        let mut samples: Vec<(Point2<f64>, f64)> = (0..400)
+            .map(|_| {
+                let q = Point2::new(rng.range(-0.1, 0.1), rng.range(-0.05, 0.05));
+                (q, -2.0 * q.x * q.x)
+            })
+            .collect();
+        samples.push((Point2::new(0.0, 0.0), 0.05));
+        let field = HeightField::fit(&samples, 0.2);
+        assert!(field.at(&Point2::new(0.0, 0.0)).abs() < 1e-3);
+        assert!((field.at(&Point2::new(0.08, 0.0)) + 2.0 * 0.0064).abs() < 1e-3);
+    }
+
+    #[test]
+    fn frame_faces_up_and_away_with_the_base_toward_the_axis() {
+        // A horizontal leaf east of the axis, extending outward.
+        let points: Vec<Point3<f64>> = (0..200)
+            .map(|k| Point3::new(0.1 + 0.002 * (k % 50) as f64, 0.001 * (k / 50) as f64, 0.3))
+            .collect();
+        let plant = PlantContext {
+            up: Vector3::z(),
+            axis_point: Point3::origin(),
+        };
+        let (frame, _) = leaf_frame(&points, &plant).unwrap();
+        assert!(frame.normal.z > 0.99);
+        assert!(frame.x_axis.x > 0.99, "x runs outward from the base");
+        assert!(leaf_frame(&points[..2], &plant).is_err());
+        let line: Vec<Point3<f64>> = (0..10).map(|k| Point3::new(k as f64, 0.0, 0.0)).collect();
+        assert_eq!(leaf_frame(&line, &plant).unwrap_err(), FitError::Degenerate);
+    }
+}

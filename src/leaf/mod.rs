@@ -1,0 +1,458 @@
+//! Model-based leaf reconstruction (seed 004 §6): a generic leaf extracted from one sample
+//! segment ([`template`]) is fitted to every leaf segment ([`fit`]).
+//!
+//! [`reconstruct_leaves`] drives it from an editing session: it picks the sample leaf (the
+//! user's, or automatically the most fronto-parallel, best-segmented large leaf), computes each
+//! leaf's image boundary in its best view, fits, and collects the leaves and the segments that
+//! could not be posed (with the reason) for the branch stage.
+
+pub mod fit;
+pub mod template;
+
+use std::collections::HashMap;
+use std::time::Instant;
+
+use nalgebra::{Point2, Point3};
+use serde::Serialize;
+
+pub use fit::{
+    BoundaryView, FitError, FittedLeaf, LeafFitOptions, PlantContext, fit_leaf, leaf_frame,
+};
+pub use template::LeafTemplate;
+
+use crate::edit::{EditError, Session};
+use crate::graph::pipeline::SegmentLabel;
+use crate::util::progress::Progress;
+
+/// Which segment and view the generic leaf is taken from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct TemplateSource {
+    pub segment: u32,
+    pub view: usize,
+}
+
+/// Settings of the leaf stage.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct LeafOptions {
+    pub fit: LeafFitOptions,
+    /// The user's sample leaf; `None` chooses one automatically.
+    pub template: Option<TemplateSource>,
+}
+
+/// A leaf of the plant model.
+#[derive(Clone, Debug, Serialize)]
+pub struct ReconstructedLeaf {
+    /// The segment it was fitted to (its `leaf_NNN` number).
+    pub segment: u32,
+    /// The view its boundary and texture come from.
+    pub view: Option<usize>,
+    pub fit: FittedLeaf,
+}
+
+/// A leaf segment that got no leaf, and why.
+#[derive(Clone, Debug, Serialize)]
+pub struct SkippedLeaf {
+    pub segment: u32,
+    pub points: usize,
+    pub reason: String,
+    /// Left for the branch stage to pose from its nearest branch (seed 004 §8).
+    pub for_branch_stage: bool,
+}
+
+/// Seconds per stage of the leaf reconstruction.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct LeafTimings {
+    pub template: f64,
+    pub boundaries: f64,
+    pub fitting: f64,
+}
+
+/// Everything the leaf stage produced.
+#[derive(Clone, Debug, Serialize)]
+pub struct LeafReconstruction {
+    pub template_source: Option<TemplateSource>,
+    #[serde(skip)]
+    pub template: LeafTemplate,
+    pub leaves: Vec<ReconstructedLeaf>,
+    pub skipped: Vec<SkippedLeaf>,
+    pub timings: LeafTimings,
+}
+
+/// Leaf-stage failures.
+#[derive(Debug, thiserror::Error)]
+pub enum LeafError {
+    #[error(transparent)]
+    Edit(#[from] EditError),
+    #[error("no leaf segment is suitable as the generic leaf (none with an image boundary)")]
+    NoTemplate,
+    #[error("the chosen generic leaf (segment {segment}, view {view}): {message}")]
+    BadTemplate {
+        segment: u32,
+        view: usize,
+        message: String,
+    },
+}
+
+/// The session's photos as RGB, loaded on demand.
+struct Photos {
+    cache: HashMap<usize, Option<image::RgbImage>>,
+}
+
+impl Photos {
+    fn get(&mut self, session: &Session, view: usize) -> Option<&image::RgbImage> {
+        self.cache
+            .entry(view)
+            .or_insert_with(|| {
+                use opencv::prelude::*;
+                let image = &session.scene().reconstruction.images()[view];
+                let mat = session.scene().load_image(image).ok()?;
+                let (w, h) = (mat.cols() as u32, mat.rows() as u32);
+                let bytes = mat.data_bytes().ok()?;
+                Some(image::RgbImage::from_fn(w, h, |x, y| {
+                    let i = ((y * w + x) * 3) as usize;
+                    image::Rgb([bytes[i + 2], bytes[i + 1], bytes[i]])
+                }))
+            })
+            .as_ref()
+    }
+}
+
+/// The plant's up direction and axis from the automatic segmentation.
+pub fn plant_context(session: &Session) -> PlantContext {
+    let foreground = &session.segmentation().foreground;
+    PlantContext {
+        up: foreground.up,
+        axis_point: foreground.plant_center,
+    }
+}
+
+/// The points of a segment.
+fn segment_points(session: &Session, segment: u32) -> Vec<Point3<f64>> {
+    let points = &session.segmentation().points;
+    session
+        .members(segment)
+        .iter()
+        .map(|&p| points.positions[p as usize])
+        .collect()
+}
+
+/// Views of a segment ranked by how well they see it: visible points × |cos| between the
+/// leaf normal and the viewing ray (fronto-parallel views first).
+fn ranked_views(session: &Session, segment: u32, plant: &PlantContext) -> Vec<(f64, usize)> {
+    let members = session.members(segment);
+    let points = &session.segmentation().points;
+    let positions: Vec<Point3<f64>> = members
+        .iter()
+        .map(|&p| points.positions[p as usize])
+        .collect();
+    let Ok((frame, _)) = leaf_frame(&positions, plant) else {
+        return Vec::new();
+    };
+    let mut counts: HashMap<u32, usize> = HashMap::new();
+    for &p in &members {
+        for &v in &points.views[p as usize] {
+            *counts.entry(v).or_insert(0) += 1;
+        }
+    }
+    let images = session.scene().reconstruction.images();
+    let mut ranked: Vec<(f64, usize)> = counts
+        .into_iter()
+        .map(|(v, count)| {
+            let centre = images[v as usize].center_world();
+            let ray = (frame.origin - centre).normalize();
+            (count as f64 * ray.dot(&frame.normal).abs(), v as usize)
+        })
+        .collect();
+    ranked.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+    ranked
+}
+
+/// Area of an image polygon back-projected onto a leaf plane (0 when too oblique).
+fn plane_area(session: &Session, view: usize, polygon: &[[f64; 2]], frame: &fit::LeafFrame) -> f64 {
+    let model = &session.scene().reconstruction;
+    let image = &model.images()[view];
+    let camera = model.camera_of(image);
+    let world_from_camera = image.camera_from_world.inverse();
+    let origin = world_from_camera * Point3::origin();
+    let projected: Vec<Point2<f64>> = polygon
+        .iter()
+        .filter_map(|p| {
+            let ray = camera.unproject(&Point2::new(p[0], p[1]))?;
+            let direction = (world_from_camera.rotation * ray).normalize();
+            let denominator = direction.dot(&frame.normal);
+            if denominator.abs() < 0.15 {
+                return None;
+            }
+            let t = (frame.origin - origin).dot(&frame.normal) / denominator;
+            (t > 0.0).then(|| frame.to_plane(&(origin + direction * t)).0)
+        })
+        .collect();
+    if projected.len() * 10 < polygon.len() * 8 {
+        return 0.0;
+    }
+    let n = projected.len();
+    (0..n)
+        .map(|i| {
+            let (a, b) = (projected[i], projected[(i + 1) % n]);
+            a.x * b.y - b.x * a.y
+        })
+        .sum::<f64>()
+        .abs()
+        * 0.5
+}
+
+/// Builds the generic leaf from a segment's boundary in a view: the boundary is back-projected
+/// onto the leaf's surface, the texture is the photo inside it.
+pub fn extract_template(
+    session: &mut Session,
+    source: TemplateSource,
+    plant: &PlantContext,
+    texture_size: u32,
+) -> Result<LeafTemplate, LeafError> {
+    let bad = |message: String| LeafError::BadTemplate {
+        segment: source.segment,
+        view: source.view,
+        message,
+    };
+    let points = segment_points(session, source.segment);
+    let (frame, _) = leaf_frame(&points, plant).map_err(|e| bad(e.to_string()))?;
+    let samples: Vec<(Point2<f64>, f64)> = points.iter().map(|p| frame.to_plane(p)).collect();
+    let length_guess = samples
+        .iter()
+        .map(|s| s.0.coords.norm())
+        .fold(0.0, f64::max)
+        * 2.0;
+    let heights = fit::HeightField::fit(&samples, length_guess);
+    let polygon = session
+        .compute_boundary(source.segment, source.view)?
+        .polygon
+        .clone();
+    let image = &session.scene().reconstruction.images()[source.view];
+    let camera = session.scene().reconstruction.camera_of(image).clone();
+    let camera_from_world = image.camera_from_world;
+    let world_from_camera = camera_from_world.inverse();
+    let origin = world_from_camera * Point3::origin();
+    let outline: Vec<Point2<f64>> = polygon
+        .iter()
+        .filter_map(|p| {
+            let ray = camera.unproject(&Point2::new(p[0], p[1]))?;
+            let direction = (world_from_camera.rotation * ray).normalize();
+            let denominator = direction.dot(&frame.normal);
+            if denominator.abs() < 0.15 {
+                return None;
+            }
+            let t = (frame.origin - origin).dot(&frame.normal) / denominator;
+            (t > 0.0).then(|| frame.to_plane(&(origin + direction * t)).0)
+        })
+        .collect();
+    if outline.len() < 6 {
+        return Err(bad("the view sees the leaf too obliquely".into()));
+    }
+    let (lo, hi) = outline.iter().fold(
+        (
+            Point2::new(f64::INFINITY, f64::INFINITY),
+            Point2::new(f64::NEG_INFINITY, f64::NEG_INFINITY),
+        ),
+        |(lo, hi), p| {
+            (
+                Point2::new(lo.x.min(p.x), lo.y.min(p.y)),
+                Point2::new(hi.x.max(p.x), hi.y.max(p.y)),
+            )
+        },
+    );
+    let mut photos = Photos {
+        cache: HashMap::new(),
+    };
+    let photo = photos.get(session, source.view).cloned();
+    let size = texture_size.max(8);
+    let closed: Vec<[f64; 2]> = outline.iter().map(|p| [p.x, p.y]).collect();
+    let texture = image::RgbaImage::from_fn(size, size, |i, j| {
+        let q = Point2::new(
+            lo.x + (i as f64 + 0.5) / size as f64 * (hi.x - lo.x),
+            hi.y - (j as f64 + 0.5) / size as f64 * (hi.y - lo.y),
+        );
+        let inside = {
+            let mut inside = false;
+            let n = closed.len();
+            for k in 0..n {
+                let (a, b) = (closed[k], closed[(k + 1) % n]);
+                if (a[1] > q.y) != (b[1] > q.y) {
+                    let x = a[0] + (q.y - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
+                    if q.x < x {
+                        inside = !inside;
+                    }
+                }
+            }
+            inside
+        };
+        let world = frame.to_world(&q, heights.at(&q));
+        let rgb = photo
+            .as_ref()
+            .and_then(|photo| {
+                let pixel = camera.project(&(camera_from_world * world).coords)?;
+                let (x, y) = (pixel.x as u32, pixel.y as u32);
+                (x < photo.width() && y < photo.height()).then(|| *photo.get_pixel(x, y))
+            })
+            .unwrap_or(image::Rgb([70, 130, 55]));
+        image::Rgba([rgb[0], rgb[1], rgb[2], if inside { 255 } else { 0 }])
+    });
+    LeafTemplate::from_outline(&outline, texture).map_err(|e| bad(e.to_string()))
+}
+
+/// Chooses the generic leaf: among the largest leaf segments, the one whose best view sees it
+/// most frontally and whose boundary covers its projected points best.
+pub fn choose_template(
+    session: &mut Session,
+    plant: &PlantContext,
+) -> Result<TemplateSource, LeafError> {
+    let mut sizes: Vec<(usize, u32)> = session
+        .segments()
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.is_some_and(|s| s.label == SegmentLabel::Leaf))
+        .map(|(id, _)| (session.members(id as u32).len(), id as u32))
+        .filter(|(n, _)| *n >= 50)
+        .collect();
+    sizes.sort_by(|a, b| b.cmp(a));
+    let mut best: Option<(f64, TemplateSource)> = None;
+    for &(count, segment) in sizes.iter().take(6) {
+        let Some(&(frontal, view)) = ranked_views(session, segment, plant).first() else {
+            continue;
+        };
+        let Ok(boundary) = session.compute_boundary(segment, view) else {
+            continue;
+        };
+        let cosine = frontal / count as f64;
+        let score = cosine * boundary.area_px.sqrt() * (count as f64).sqrt();
+        if best.is_none_or(|(s, _)| score > s) {
+            best = Some((score, TemplateSource { segment, view }));
+        }
+    }
+    best.map(|(_, source)| source).ok_or(LeafError::NoTemplate)
+}
+
+/// Reconstructs every leaf segment of the session (seed 004 §6.2).
+pub fn reconstruct_leaves(
+    session: &mut Session,
+    options: &LeafOptions,
+    progress: &dyn Progress,
+) -> Result<LeafReconstruction, LeafError> {
+    let plant = plant_context(session);
+    let mut timings = LeafTimings::default();
+    progress.stage("generic leaf", 0);
+    let clock = Instant::now();
+    let source = match options.template {
+        Some(source) => Some(source),
+        None => choose_template(session, &plant).ok(),
+    };
+    let template = match source {
+        Some(source) => extract_template(session, source, &plant, 256)?,
+        None => {
+            // No image boundary anywhere: an elliptic generic leaf.
+            let ellipse: Vec<Point2<f64>> = (0..64)
+                .map(|k| {
+                    let t = std::f64::consts::TAU * k as f64 / 64.0;
+                    Point2::new(0.5 + 0.5 * t.cos(), 0.22 * t.sin())
+                })
+                .collect();
+            LeafTemplate::from_outline(&ellipse, LeafTemplate::plain_texture(64)).map_err(|e| {
+                LeafError::BadTemplate {
+                    segment: 0,
+                    view: 0,
+                    message: e.to_string(),
+                }
+            })?
+        }
+    };
+    timings.template = clock.elapsed().as_secs_f64();
+
+    let leaf_segments: Vec<u32> = session
+        .segments()
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.is_some_and(|s| s.label == SegmentLabel::Leaf))
+        .map(|(id, _)| id as u32)
+        .filter(|&id| !session.members(id).is_empty())
+        .collect();
+    progress.stage("leaf boundaries", leaf_segments.len() as u64);
+    let clock = Instant::now();
+    let mut boundary_views: HashMap<u32, usize> = HashMap::new();
+    if options.fit.use_boundary {
+        for &segment in &leaf_segments {
+            // Of the views that see the leaf best, the one whose region is largest on the
+            // leaf's plane (seed 004: "the largest region is used"): occluded views lose.
+            let points = segment_points(session, segment);
+            let frame = leaf_frame(&points, &plant).ok().map(|f| f.0);
+            let mut best: Option<(f64, usize)> = None;
+            for (_, view) in ranked_views(session, segment, &plant).into_iter().take(3) {
+                let Ok(boundary) = session.compute_boundary(segment, view) else {
+                    continue;
+                };
+                let (polygon, area_px) = (boundary.polygon.clone(), boundary.area_px);
+                let area = match &frame {
+                    Some(frame) => plane_area(session, view, &polygon, frame),
+                    None => area_px,
+                };
+                if best.is_none_or(|(a, _)| area > a) {
+                    best = Some((area, view));
+                }
+            }
+            if let Some((_, view)) = best {
+                boundary_views.insert(segment, view);
+            }
+            progress.advance(1);
+        }
+    }
+    timings.boundaries = clock.elapsed().as_secs_f64();
+
+    progress.stage("fitting leaves", leaf_segments.len() as u64);
+    let clock = Instant::now();
+    let mut photos = Photos {
+        cache: HashMap::new(),
+    };
+    let mut leaves = Vec::new();
+    let mut skipped = Vec::new();
+    for &segment in &leaf_segments {
+        let points = segment_points(session, segment);
+        let view = boundary_views.get(&segment).copied();
+        let photo = view.and_then(|v| photos.get(session, v).cloned());
+        let result = {
+            let boundary = view.and_then(|v| session.boundary(segment, v));
+            let model = &session.scene().reconstruction;
+            let boundary_view = match (view, boundary) {
+                (Some(v), Some(b)) => Some(BoundaryView {
+                    polygon: &b.polygon,
+                    camera: model.camera_of(&model.images()[v]),
+                    camera_from_world: model.images()[v].camera_from_world,
+                    image: photo.as_ref(),
+                }),
+                _ => None,
+            };
+            fit_leaf(
+                &points,
+                &template,
+                &plant,
+                boundary_view.as_ref(),
+                &options.fit,
+            )
+        };
+        match result {
+            Ok(fit) => leaves.push(ReconstructedLeaf { segment, view, fit }),
+            Err(e) => skipped.push(SkippedLeaf {
+                segment,
+                points: points.len(),
+                for_branch_stage: matches!(e, FitError::TooFewPoints(_)),
+                reason: e.to_string(),
+            }),
+        }
+        progress.advance(1);
+    }
+    timings.fitting = clock.elapsed().as_secs_f64();
+    Ok(LeafReconstruction {
+        template_source: source,
+        template,
+        leaves,
+        skipped,
+        timings,
+    })
+}
