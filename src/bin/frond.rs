@@ -490,6 +490,8 @@ fn reconstruct(
             "length": l.fit.length,
             "area": l.fit.area,
             "icp": l.fit.icp,
+            "boundary_area": l.fit.boundary_area,
+            "outline_area": l.fit.outline_area,
             "textured_fraction": l.fit.textured_fraction,
             "notes": l.fit.notes,
         })).collect::<Vec<_>>(),

@@ -267,6 +267,8 @@ pub struct LeafGeometryError {
     /// Symmetric Chamfer distance between the surfaces divided by the GT leaf length.
     pub chamfer_relative: f64,
     pub area_relative_error: f64,
+    /// Predicted area over GT area (above 1: the prediction is too large).
+    pub area_ratio: f64,
     /// Angle between mean normals, ignoring orientation, degrees.
     pub normal_angle_deg: f64,
 }
@@ -500,6 +502,7 @@ pub fn evaluate(
                 segment: m.segment,
                 chamfer_relative: chamfer / record.length,
                 area_relative_error: (pred_area - record.area).abs() / record.area,
+                area_ratio: pred_area / record.area,
                 normal_angle_deg: angle,
             })
         })

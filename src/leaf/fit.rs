@@ -21,6 +21,9 @@ pub struct LeafFitOptions {
     pub icp_tolerance: f64,
     /// …or after this many iterations.
     pub icp_iterations: usize,
+    /// Share of correspondences kept in each direction, the closest ones (trimmed ICP):
+    /// notches an occluder cuts into the image boundary do not pull the outline in.
+    pub icp_inlier_share: f64,
     /// Texture tile size (texels).
     pub texture_size: u32,
 }
@@ -32,6 +35,7 @@ impl Default for LeafFitOptions {
             deform: true,
             icp_tolerance: 0.004,
             icp_iterations: 40,
+            icp_inlier_share: 1.0,
             texture_size: 128,
         }
     }
@@ -266,9 +270,43 @@ pub struct IcpReport {
     pub final_distance: f64,
 }
 
-/// Affine ICP of two closed curves (Besl & McKay 1992, for curves): correspondences both ways
-/// (outline → nearest boundary point and boundary → nearest outline point), least-squares
-/// affine update, until the mean distance falls below the tolerance or stops improving.
+/// Correspondences from each point of `from` to its nearest point on the closed curve `to`
+/// (or, with `to_points`, its nearest point of `to`), the closest `share` of them.
+fn trimmed_pairs(
+    from: &[Point2<f64>],
+    to: &[Point2<f64>],
+    to_points: bool,
+    share: f64,
+) -> Vec<(usize, Point2<f64>, f64)> {
+    let mut pairs: Vec<(usize, Point2<f64>, f64)> = from
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let target = if to_points {
+                to.iter()
+                    .copied()
+                    .min_by(|a, b| (a - p).norm_squared().total_cmp(&(b - p).norm_squared()))
+                    .unwrap_or(*p)
+            } else {
+                closest_on_loop(p, to)
+            };
+            (i, target, (target - p).norm())
+        })
+        .collect();
+    let keep = ((pairs.len() as f64 * share.clamp(0.1, 1.0)).ceil() as usize).max(3);
+    if keep < pairs.len() {
+        pairs.select_nth_unstable_by(keep, |a, b| a.2.total_cmp(&b.2));
+        pairs.truncate(keep);
+    }
+    pairs
+}
+
+/// Affine ICP of two closed curves (seed 004 §6.2, after Besl & McKay 1992, for curves):
+/// correspondences both ways (outline → nearest boundary point, and boundary → nearest
+/// outline point, so the outline can neither shrink into part of the boundary nor swell
+/// past it), the closest share of each kept (trimmed ICP, Chetverikov et al. 2002),
+/// least-squares affine update, until the mean distance of the kept pairs falls below the
+/// tolerance or stops improving.
 pub fn register_outline(
     template_outline: &[Point2<f64>],
     boundary: &[Point2<f64>],
@@ -276,48 +314,46 @@ pub fn register_outline(
     length: f64,
     options: &LeafFitOptions,
 ) -> (Affine2, IcpReport) {
-    let mut current = initial;
-    let mean_distance = |affine: &Affine2| {
+    let share = options.icp_inlier_share;
+    let pairs = |affine: &Affine2| {
         let warped: Vec<Point2<f64>> = template_outline.iter().map(|p| affine.apply(p)).collect();
-        let forward: f64 = warped
-            .iter()
-            .map(|q| (q - closest_on_loop(q, boundary)).norm())
-            .sum::<f64>()
-            / warped.len() as f64;
-        let backward: f64 = boundary
-            .iter()
-            .map(|b| (b - closest_on_loop(b, &warped)).norm())
-            .sum::<f64>()
-            / boundary.len() as f64;
-        0.5 * (forward + backward) / length.max(1e-12)
+        let forward = trimmed_pairs(&warped, boundary, false, share);
+        let backward = trimmed_pairs(boundary, &warped, true, share);
+        (forward, backward)
     };
-    let initial_distance = mean_distance(&current);
+    let mean_distance = |forward: &[(usize, Point2<f64>, f64)],
+                         backward: &[(usize, Point2<f64>, f64)]| {
+        let mean = |v: &[(usize, Point2<f64>, f64)]| {
+            v.iter().map(|x| x.2).sum::<f64>() / v.len().max(1) as f64
+        };
+        0.5 * (mean(forward) + mean(backward)) / length.max(1e-12)
+    };
+    let mut current = initial;
+    let (mut forward, mut backward) = pairs(&current);
+    let initial_distance = mean_distance(&forward, &backward);
     let mut distance = initial_distance;
     let mut iterations = 0;
     while iterations < options.icp_iterations && distance > options.icp_tolerance {
         iterations += 1;
         let warped: Vec<Point2<f64>> = template_outline.iter().map(|p| current.apply(p)).collect();
-        let mut from = Vec::with_capacity(template_outline.len() + boundary.len());
+        let mut from = Vec::with_capacity(forward.len() + backward.len());
         let mut to = Vec::with_capacity(from.capacity());
-        for (p, q) in template_outline.iter().zip(&warped) {
-            from.push(*p);
-            to.push(closest_on_loop(q, boundary));
+        for (i, target, _) in &forward {
+            from.push(template_outline[*i]);
+            to.push(*target);
         }
-        // Boundary → outline: find the template point whose warped image is nearest.
-        for b in boundary {
-            if let Some((i, _)) = warped.iter().enumerate().min_by(|x, y| {
-                (x.1 - b)
-                    .norm_squared()
-                    .total_cmp(&(y.1 - b).norm_squared())
-            }) {
+        // Boundary → outline: the template point whose warped image is nearest.
+        for (b, target, _) in &backward {
+            if let Some(i) = warped.iter().position(|w| w == target) {
                 from.push(template_outline[i]);
-                to.push(*b);
+                to.push(boundary[*b]);
             }
         }
         let Some(next) = Affine2::fit(&from, &to) else {
             break;
         };
-        let next_distance = mean_distance(&next);
+        let (next_forward, next_backward) = pairs(&next);
+        let next_distance = mean_distance(&next_forward, &next_backward);
         if next_distance >= distance - 1e-6 {
             if next_distance < distance {
                 current = next;
@@ -327,6 +363,8 @@ pub fn register_outline(
         }
         current = next;
         distance = next_distance;
+        forward = next_forward;
+        backward = next_backward;
     }
     (
         current,
@@ -353,12 +391,28 @@ pub struct FittedLeaf {
     /// RMS distance of the points to the fitted surface (metres).
     pub point_residual: f64,
     pub icp: Option<IcpReport>,
+    /// Area enclosed by the back-projected image boundary on the leaf plane (m²), when used.
+    pub boundary_area: Option<f64>,
+    /// Area enclosed by the fitted outline on the leaf plane (m²).
+    pub outline_area: f64,
     /// Length of the leaf along its midrib in the plane (metres).
     pub length: f64,
     pub area: f64,
     /// Share of texels taken from the photo (the rest inherit the generic texture).
     pub textured_fraction: f64,
     pub notes: Vec<String>,
+}
+
+/// Area enclosed by a closed polygon (shoelace formula).
+pub fn polygon_area(polygon: &[Point2<f64>]) -> f64 {
+    let n = polygon.len();
+    0.5 * (0..n)
+        .map(|i| {
+            let (a, b) = (polygon[i], polygon[(i + 1) % n]);
+            a.x * b.y - b.x * a.y
+        })
+        .sum::<f64>()
+        .abs()
 }
 
 fn percentile(values: &mut [f64], q: f64) -> f64 {
@@ -512,6 +566,7 @@ pub fn fit_leaf(
 
     // Boundary warp: register the outline to the back-projected image boundary.
     let mut icp = None;
+    let mut boundary_area = None;
     if options.use_boundary
         && let Some(view) = boundary
     {
@@ -529,6 +584,7 @@ pub fn fit_leaf(
                 },
                 150,
             );
+            boundary_area = Some(polygon_area(&projected));
             let outline = template.dense_outline(120);
             let (registered, report) = register_outline(&outline, &dense, affine, length, options);
             let area_ratio = registered.matrix.determinant() / affine.matrix.determinant();
@@ -611,6 +667,13 @@ pub fn fit_leaf(
         }
     }
     let area = mesh.area();
+    let outline_area = polygon_area(
+        &template
+            .dense_outline(120)
+            .iter()
+            .map(|p| affine.apply(p))
+            .collect::<Vec<_>>(),
+    );
     Ok(FittedLeaf {
         frame,
         affine,
@@ -620,6 +683,8 @@ pub fn fit_leaf(
         points: points.len(),
         point_residual,
         icp,
+        boundary_area,
+        outline_area,
         length,
         area,
         textured_fraction: from_photo as f64 / (size * size) as f64,

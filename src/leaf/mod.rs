@@ -167,8 +167,17 @@ fn ranked_views(session: &Session, segment: u32, plant: &PlantContext) -> Vec<(f
     ranked
 }
 
-/// Area of an image polygon back-projected onto a leaf plane (0 when too oblique).
-fn plane_area(session: &Session, view: usize, polygon: &[[f64; 2]], frame: &fit::LeafFrame) -> f64 {
+/// How many of a leaf's best views get an image boundary to choose from.
+const BOUNDARY_CANDIDATES: usize = 5;
+
+/// An image polygon back-projected onto a leaf plane, in plane coordinates (None when too
+/// oblique: fewer than 80% of its vertices land on the plane at a usable angle).
+fn plane_polygon(
+    session: &Session,
+    view: usize,
+    polygon: &[[f64; 2]],
+    frame: &fit::LeafFrame,
+) -> Option<Vec<Point2<f64>>> {
     let model = &session.scene().reconstruction;
     let image = &model.images()[view];
     let camera = model.camera_of(image);
@@ -187,18 +196,86 @@ fn plane_area(session: &Session, view: usize, polygon: &[[f64; 2]], frame: &fit:
             (t > 0.0).then(|| frame.to_plane(&(origin + direction * t)).0)
         })
         .collect();
-    if projected.len() * 10 < polygon.len() * 8 {
-        return 0.0;
+    (projected.len() >= 3 && projected.len() * 10 >= polygon.len() * 8).then_some(projected)
+}
+
+/// Even-odd point-in-polygon test.
+fn inside(p: &Point2<f64>, polygon: &[Point2<f64>]) -> bool {
+    let mut result = false;
+    let mut j = polygon.len() - 1;
+    for i in 0..polygon.len() {
+        let (a, b) = (polygon[i], polygon[j]);
+        if (a.y > p.y) != (b.y > p.y) && p.x < (b.x - a.x) * (p.y - a.y) / (b.y - a.y) + a.x {
+            result = !result;
+        }
+        j = i;
     }
-    let n = projected.len();
-    (0..n)
-        .map(|i| {
-            let (a, b) = (projected[i], projected[(i + 1) % n]);
-            a.x * b.y - b.x * a.y
+    result
+}
+
+/// Intersection over union of the regions inside each polygon, rasterised on a 64 × 64 grid
+/// over their joint bounding box.
+fn region_overlaps(polygons: &[Vec<Point2<f64>>]) -> Vec<Vec<f64>> {
+    const GRID: usize = 64;
+    let (mut lo, mut hi) = (
+        Point2::new(f64::INFINITY, f64::INFINITY),
+        Point2::new(f64::NEG_INFINITY, f64::NEG_INFINITY),
+    );
+    for p in polygons.iter().flatten() {
+        lo = Point2::new(lo.x.min(p.x), lo.y.min(p.y));
+        hi = Point2::new(hi.x.max(p.x), hi.y.max(p.y));
+    }
+    let cells: Vec<Vec<bool>> = polygons
+        .iter()
+        .map(|polygon| {
+            (0..GRID * GRID)
+                .map(|k| {
+                    let q = Point2::new(
+                        lo.x + (hi.x - lo.x) * ((k % GRID) as f64 + 0.5) / GRID as f64,
+                        lo.y + (hi.y - lo.y) * ((k / GRID) as f64 + 0.5) / GRID as f64,
+                    );
+                    inside(&q, polygon)
+                })
+                .collect()
         })
-        .sum::<f64>()
-        .abs()
-        * 0.5
+        .collect();
+    cells
+        .iter()
+        .map(|a| {
+            cells
+                .iter()
+                .map(|b| {
+                    let both = a.iter().zip(b).filter(|(x, y)| **x && **y).count();
+                    let either = a.iter().zip(b).filter(|(x, y)| **x || **y).count();
+                    if either == 0 {
+                        0.0
+                    } else {
+                        both as f64 / either as f64
+                    }
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// Of a leaf's candidate regions (back-projected onto its plane, one per view), the largest
+/// (seed 004 §6.2: "the largest region is used") among those consistent with the medoid
+/// (the region overlapping the others most). A boundary whose graph cut leaked into the
+/// background is large but disagrees with the rest, so it cannot win.
+fn consensus_region(regions: &[(usize, Vec<Point2<f64>>)]) -> Option<usize> {
+    const CONSISTENT_IOU: f64 = 0.75;
+    let polygons: Vec<Vec<Point2<f64>>> = regions.iter().map(|(_, p)| p.clone()).collect();
+    let overlaps = region_overlaps(&polygons);
+    let medoid = (0..regions.len()).max_by(|&a, &b| {
+        let agreement = |i: usize| -> f64 { overlaps[i].iter().sum() };
+        agreement(a).total_cmp(&agreement(b))
+    })?;
+    (0..regions.len())
+        .filter(|&i| i == medoid || overlaps[medoid][i] >= CONSISTENT_IOU)
+        .max_by(|&a, &b| {
+            fit::polygon_area(&polygons[a]).total_cmp(&fit::polygon_area(&polygons[b]))
+        })
+        .map(|i| regions[i].0)
 }
 
 /// Builds the generic leaf from a segment's boundary in a view: the boundary is back-projected
@@ -383,21 +460,24 @@ pub fn reconstruct_leaves(
             // leaf's plane (seed 004: "the largest region is used"): occluded views lose.
             let points = segment_points(session, segment);
             let frame = leaf_frame(&points, &plant).ok().map(|f| f.0);
-            let mut best: Option<(f64, usize)> = None;
-            for (_, view) in ranked_views(session, segment, &plant).into_iter().take(3) {
+            let mut regions = Vec::new();
+            let mut fallback = None;
+            for (_, view) in ranked_views(session, segment, &plant)
+                .into_iter()
+                .take(BOUNDARY_CANDIDATES)
+            {
                 let Ok(boundary) = session.compute_boundary(segment, view) else {
                     continue;
                 };
-                let (polygon, area_px) = (boundary.polygon.clone(), boundary.area_px);
-                let area = match &frame {
-                    Some(frame) => plane_area(session, view, &polygon, frame),
-                    None => area_px,
-                };
-                if best.is_none_or(|(a, _)| area > a) {
-                    best = Some((area, view));
+                let polygon = boundary.polygon.clone();
+                fallback.get_or_insert(view);
+                if let Some(frame) = &frame
+                    && let Some(region) = plane_polygon(session, view, &polygon, frame)
+                {
+                    regions.push((view, region));
                 }
             }
-            if let Some((_, view)) = best {
+            if let Some(view) = consensus_region(&regions).or(fallback) {
                 boundary_views.insert(segment, view);
             }
             progress.advance(1);

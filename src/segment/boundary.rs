@@ -5,6 +5,7 @@
 //! across superpixel borders as smoothness, gives the region; its outer contour is the
 //! boundary polygon.
 
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::Point2;
 use opencv::core::{Mat, Point, Scalar, Vector};
 use opencv::prelude::*;
@@ -58,6 +59,64 @@ pub struct Boundary {
     pub superpixels: usize,
 }
 
+/// How far a region may extend from the segment's projected points: two point spacings (the
+/// median nearest-neighbour distance of the projections) or one superpixel, whichever is
+/// larger; beyond it, labelling a pixel foreground costs one nat per spacing.
+struct ForegroundReach {
+    tree: Option<ImmutableKdTree<f64, 2>>,
+    spacing: f64,
+    reach: f64,
+}
+
+impl ForegroundReach {
+    fn new(foreground: &[Point2<f64>], superpixel_step: f64) -> Self {
+        let points: Vec<[f64; 2]> = foreground.iter().map(|p| [p.x, p.y]).collect();
+        let tree = (points.len() >= 2)
+            .then(|| ImmutableKdTree::<f64, 2>::new_from_slice(&points).ok())
+            .flatten();
+        let spacing = match &tree {
+            Some(tree) => {
+                let two = std::num::NonZero::<usize>::MIN.saturating_add(1);
+                let mut gaps: Vec<f64> = points
+                    .iter()
+                    .filter_map(|p| {
+                        tree.query(p)
+                            .nearest_n::<SquaredEuclidean<f64>>(two)
+                            .execute()
+                            .get(1)
+                            .map(|n| n.distance.sqrt())
+                    })
+                    .collect();
+                gaps.sort_by(f64::total_cmp);
+                gaps.get(gaps.len() / 2).copied().unwrap_or(superpixel_step)
+            }
+            None => superpixel_step,
+        }
+        .max(0.5);
+        Self {
+            tree,
+            spacing,
+            reach: (2.0 * spacing).max(superpixel_step),
+        }
+    }
+
+    /// Cost per pixel of calling a pixel at `at` foreground, nats.
+    fn penalty(&self, at: &Point2<f64>) -> f64 {
+        let Some(tree) = &self.tree else { return 0.0 };
+        let one = std::num::NonZero::<usize>::MIN;
+        let Some(nearest) = tree
+            .query(&[at.x, at.y])
+            .nearest_n::<SquaredEuclidean<f64>>(one)
+            .execute()
+            .first()
+            .map(|n| n.distance.sqrt())
+        else {
+            return 0.0;
+        };
+        ((nearest - self.reach) / self.spacing).max(0.0)
+    }
+}
+
 /// Watershed superpixels of one view with their colours and adjacency.
 pub struct Oversegmentation {
     width: usize,
@@ -69,6 +128,8 @@ pub struct Oversegmentation {
     histograms: Vec<Vec<(u16, u32)>>,
     mean_colors: Vec<[f32; 3]>,
     sizes: Vec<u32>,
+    /// Mean pixel position per superpixel.
+    centroids: Vec<Point2<f64>>,
     /// `(a, b, border length)` with `a < b`.
     borders: Vec<(u32, u32, u32)>,
     bins: usize,
@@ -133,7 +194,10 @@ impl Oversegmentation {
             vec![std::collections::HashMap::new(); count];
         let mut sums = vec![[0f64; 3]; count];
         let mut sizes = vec![0u32; count];
+        let mut position_sums = vec![[0f64; 2]; count];
         for (i, &label) in labels.iter().enumerate() {
+            position_sums[label as usize][0] += (i % width) as f64 + 0.5;
+            position_sums[label as usize][1] += (i / width) as f64 + 0.5;
             let (b, g, r) = (
                 bytes[i * channels],
                 bytes[i * channels + 1],
@@ -161,6 +225,14 @@ impl Oversegmentation {
             .map(|(s, &n)| {
                 let n = n.max(1) as f64;
                 [(s[0] / n) as f32, (s[1] / n) as f32, (s[2] / n) as f32]
+            })
+            .collect();
+        let centroids = position_sums
+            .iter()
+            .zip(&sizes)
+            .map(|(s, &n)| {
+                let n = n.max(1) as f64;
+                Point2::new(s[0] / n, s[1] / n)
             })
             .collect();
         let mut border_map: std::collections::HashMap<(u32, u32), u32> =
@@ -191,6 +263,7 @@ impl Oversegmentation {
             histograms,
             mean_colors,
             sizes,
+            centroids,
             borders,
             bins,
         })
@@ -248,20 +321,12 @@ impl Oversegmentation {
         }
         let margin = 0.5 * (hi - lo).max();
         let (lo, hi) = (lo.map(|c| c - margin), hi.map(|c| c + margin));
-        let mut in_window = vec![false; n];
-        let mut centroid_sum = vec![[0f64; 2]; n];
-        for y in 0..self.height {
-            for x in 0..self.width {
-                let l = self.labels[y * self.width + x] as usize;
-                centroid_sum[l][0] += x as f64 + 0.5;
-                centroid_sum[l][1] += y as f64 + 0.5;
-            }
-        }
-        for l in 0..n {
-            let size = self.sizes[l].max(1) as f64;
-            let c = Point2::new(centroid_sum[l][0] / size, centroid_sum[l][1] / size);
-            in_window[l] = c.x >= lo.x && c.x <= hi.x && c.y >= lo.y && c.y <= hi.y;
-        }
+        let in_window: Vec<bool> = self
+            .centroids
+            .iter()
+            .map(|c| c.x >= lo.x && c.x <= hi.x && c.y >= lo.y && c.y <= hi.y)
+            .collect();
+        let reach = ForegroundReach::new(foreground, options.superpixel_step as f64);
 
         let seed_fg: Vec<bool> = (0..n)
             .map(|l| fg_votes[l] > 0 && fg_votes[l] >= bg_votes[l])
@@ -270,10 +335,13 @@ impl Oversegmentation {
             .map(|l| !seed_fg[l] && (bg_votes[l] > 0 || !in_window[l]))
             .collect();
         let bins = self.bins * self.bins * self.bins;
-        let model = |seeds: &[bool]| {
+        // Colour models: the foreground from its seeds; the background from its seeds and
+        // from everything outside the search window, so that colours the segment's points
+        // never touch (a backdrop without 3D points) are explained as background.
+        let model = |samples: &dyn Fn(usize) -> bool| {
             let mut h = vec![1.0f64; bins];
             for l in 0..n {
-                if seeds[l] && in_window[l] {
+                if samples(l) {
                     for &(bin, c) in &self.histograms[l] {
                         h[bin as usize] += c as f64;
                     }
@@ -282,21 +350,48 @@ impl Oversegmentation {
             let total: f64 = h.iter().sum();
             h.iter().map(|v| -(v / total).ln()).collect::<Vec<f64>>()
         };
-        let (cost_fg, cost_bg) = (model(&seed_fg), model(&seed_bg));
+        let cost_fg = model(&|l| seed_fg[l] && in_window[l]);
+        let cost_bg = model(&|l| seed_bg[l] && !seed_fg[l]);
+        // Negative log-likelihood of each superpixel's pixels under each model.
+        let colour_cost: Vec<(f64, f64)> = (0..n)
+            .map(|l| {
+                self.histograms[l]
+                    .iter()
+                    .fold((0.0, 0.0), |(as_fg, as_bg), &(bin, c)| {
+                        (
+                            as_fg + c as f64 * cost_fg[bin as usize],
+                            as_bg + c as f64 * cost_bg[bin as usize],
+                        )
+                    })
+            })
+            .collect();
+        // A vote of the segment fixes a superpixel's label only where its colour agrees: a
+        // point at the margin (or a little off it: keypoint noise) lands in a superpixel that straddles
+        // or lies outside the leaf, and must not drag that superpixel in.
+        let agrees_fg = |l: usize| colour_cost[l].0 <= colour_cost[l].1;
+        let mut hard_fg: Vec<bool> = (0..n).map(|l| seed_fg[l] && agrees_fg(l)).collect();
+        if !hard_fg.iter().any(|&h| h) {
+            hard_fg.clone_from(&seed_fg);
+        }
+        // Other segments' points are trusted as they are: where another leaf of the same
+        // colour touches this one, they are all that separates the two.
+        let hard_bg: Vec<bool> = (0..n)
+            .map(|l| !hard_fg[l] && (!in_window[l] || bg_votes[l] > fg_votes[l]))
+            .collect();
         let mut flow = MaxFlow::new(n);
         for l in 0..n {
-            if seed_fg[l] {
+            if hard_fg[l] {
                 flow.add_terminal_weights(l, f64::INFINITY, 0.0)?;
-            } else if seed_bg[l] {
+            } else if hard_bg[l] {
                 flow.add_terminal_weights(l, 0.0, f64::INFINITY)?;
             } else {
                 // Cutting the source link labels the superpixel background: it costs the
                 // background's negative log-likelihood, and vice versa.
-                let (mut as_fg, mut as_bg) = (0.0, 0.0);
-                for &(bin, c) in &self.histograms[l] {
-                    as_fg += c as f64 * cost_fg[bin as usize];
-                    as_bg += c as f64 * cost_bg[bin as usize];
-                }
+                let (mut as_fg, as_bg) = colour_cost[l];
+                // Spatial prior: the leaf lies where its points are; a superpixel far from
+                // every projected point of the segment pays per pixel for each point
+                // spacing beyond the reach.
+                as_fg += self.sizes[l] as f64 * reach.penalty(&self.centroids[l]);
                 flow.add_terminal_weights(l, as_bg, as_fg)?;
             }
         }
