@@ -15,9 +15,12 @@ use frond::util::progress::NoProgress;
 use frond::util::rng::Rng;
 use petgraph::Graph;
 
+/// A flow problem: node count, terminal (source, sink) capacities per node, edges (a, b, capacity).
+type GridProblem = (usize, Vec<(f64, f64)>, Vec<(usize, usize, f64)>);
+
 /// A 100×100 grid with 4-neighbour capacities and random terminal weights (a typical vision
-/// graph), as (nodes, terminal (source, sink) per node, edges (a, b, capacity)).
-fn grid(seed: u64) -> (usize, Vec<(f64, f64)>, Vec<(usize, usize, f64)>) {
+/// graph).
+fn grid(seed: u64) -> GridProblem {
     let side = 100;
     let mut rng = Rng::seed_from(seed);
     let terminals = (0..side * side)

@@ -16,16 +16,16 @@ fn same_flow_as_dinics_and_a_valid_cut() {
         let (source, sink) = (nodes[n], nodes[n + 1]);
         let mut flow = MaxFlow::new(n);
         let mut edges: Vec<(usize, usize, f64)> = Vec::new();
-        for v in 0..n {
+        for (v, &node) in nodes.iter().enumerate().take(n) {
             if rng.chance(0.35) {
                 let c = rng.range(0.1, 10.0);
-                graph.add_edge(source, nodes[v], c);
+                graph.add_edge(source, node, c);
                 flow.add_terminal_weights(v, c, 0.0).unwrap();
                 edges.push((n, v, c));
             }
             if rng.chance(0.35) {
                 let c = rng.range(0.1, 10.0);
-                graph.add_edge(nodes[v], sink, c);
+                graph.add_edge(node, sink, c);
                 flow.add_terminal_weights(v, 0.0, c).unwrap();
                 edges.push((v, n + 1, c));
             }

@@ -307,7 +307,22 @@ impl Session {
         true
     }
 
+    /// Drops the cached image boundaries of every segment whose members a change moves:
+    /// they describe regions that no longer exist.
+    fn forget_boundaries(&mut self, change: &Change) {
+        let touched: HashSet<i32> = change
+            .points
+            .iter()
+            .flat_map(|&(_, before, after)| [before, after])
+            .collect();
+        if !touched.is_empty() {
+            self.boundaries
+                .retain(|(segment, _), _| !touched.contains(&(*segment as i32)));
+        }
+    }
+
     fn forward(&mut self, change: &Change) {
+        self.forget_boundaries(change);
         for &(point, _, after) in &change.points {
             self.segment_of[point as usize] = after;
         }
@@ -317,6 +332,7 @@ impl Session {
     }
 
     fn backward(&mut self, change: &Change) {
+        self.forget_boundaries(change);
         for &(point, before, _) in change.points.iter().rev() {
             self.segment_of[point as usize] = before;
         }
@@ -556,23 +572,38 @@ impl Session {
         Ok(computed)
     }
 
-    /// Computes (and caches) the image boundary of a segment in a view (seed 004 §5.4).
-    pub fn compute_boundary(&mut self, segment: u32, view: usize) -> Result<&Boundary, EditError> {
+    /// The image boundary of a segment in a view (seed 004 §5.4), computed without touching
+    /// the cache (callable from many threads at once; see [`Session::store_boundary`]).
+    pub fn boundary_in_view(&self, segment: u32, view: usize) -> Result<Boundary, EditError> {
         let superpixels = self.oversegmentation(view)?;
         let projected = self.projected(view);
-        let foreground: Vec<Point2<f64>> = projected
+        let (foreground, background): (Vec<&Projected>, Vec<&Projected>) = projected
             .iter()
-            .filter(|p| self.segment_of[p.point as usize] == segment as i32)
-            .map(|p| p.uv)
-            .collect();
-        let background: Vec<Point2<f64>> = projected
-            .iter()
-            .filter(|p| self.segment_of[p.point as usize] != segment as i32)
-            .map(|p| p.uv)
-            .collect();
-        let boundary = superpixels.boundary(&foreground, &background, &self.boundary_options)?;
+            .partition(|p| self.segment_of[p.point as usize] == segment as i32);
+        let uv = |v: Vec<&Projected>| v.into_iter().map(|p| p.uv).collect::<Vec<_>>();
+        Ok(superpixels.boundary(&uv(foreground), &uv(background), &self.boundary_options)?)
+    }
+
+    /// Caches a boundary computed by [`Session::boundary_in_view`] for the current segments.
+    pub fn store_boundary(&mut self, segment: u32, view: usize, boundary: Boundary) {
         self.boundaries.insert((segment, view), boundary);
+    }
+
+    /// Computes (and caches) the image boundary of a segment in a view (seed 004 §5.4).
+    pub fn compute_boundary(&mut self, segment: u32, view: usize) -> Result<&Boundary, EditError> {
+        if !self.boundaries.contains_key(&(segment, view)) {
+            let boundary = self.boundary_in_view(segment, view)?;
+            self.boundaries.insert((segment, view), boundary);
+        }
         Ok(&self.boundaries[&(segment, view)])
+    }
+
+    /// Computes the superpixels of these views in parallel ahead of boundary work.
+    pub fn prepare_views(&self, views: &[usize]) -> Result<(), EditError> {
+        use rayon::prelude::*;
+        views
+            .par_iter()
+            .try_for_each(|&view| self.oversegmentation(view).map(|_| ()))
     }
 
     /// The view where a segment's boundary is best: among the views seeing most of its

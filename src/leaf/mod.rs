@@ -22,6 +22,7 @@ pub use template::LeafTemplate;
 
 use crate::edit::{EditError, Session};
 use crate::graph::pipeline::SegmentLabel;
+use crate::segment::boundary::Boundary;
 use crate::util::progress::Progress;
 
 /// Which segment and view the generic leaf is taken from.
@@ -93,28 +94,17 @@ pub enum LeafError {
     },
 }
 
-/// The session's photos as RGB, loaded on demand.
-struct Photos {
-    cache: HashMap<usize, Option<image::RgbImage>>,
-}
-
-impl Photos {
-    fn get(&mut self, session: &Session, view: usize) -> Option<&image::RgbImage> {
-        self.cache
-            .entry(view)
-            .or_insert_with(|| {
-                use opencv::prelude::*;
-                let image = &session.scene().reconstruction.images()[view];
-                let mat = session.scene().load_image(image).ok()?;
-                let (w, h) = (mat.cols() as u32, mat.rows() as u32);
-                let bytes = mat.data_bytes().ok()?;
-                Some(image::RgbImage::from_fn(w, h, |x, y| {
-                    let i = ((y * w + x) * 3) as usize;
-                    image::Rgb([bytes[i + 2], bytes[i + 1], bytes[i]])
-                }))
-            })
-            .as_ref()
-    }
+/// A view's photo as RGB (None when it cannot be read: the leaf keeps the generic texture).
+fn load_photo(session: &Session, view: usize) -> Option<image::RgbImage> {
+    use opencv::prelude::*;
+    let image = &session.scene().reconstruction.images()[view];
+    let mat = session.scene().load_image(image).ok()?;
+    let (w, h) = (mat.cols() as u32, mat.rows() as u32);
+    let bytes = mat.data_bytes().ok()?;
+    Some(image::RgbImage::from_fn(w, h, |x, y| {
+        let i = ((y * w + x) * 3) as usize;
+        image::Rgb([bytes[i + 2], bytes[i + 1], bytes[i]])
+    }))
 }
 
 /// The plant's up direction and axis from the automatic segmentation.
@@ -199,20 +189,6 @@ fn plane_polygon(
     (projected.len() >= 3 && projected.len() * 10 >= polygon.len() * 8).then_some(projected)
 }
 
-/// Even-odd point-in-polygon test.
-fn inside(p: &Point2<f64>, polygon: &[Point2<f64>]) -> bool {
-    let mut result = false;
-    let mut j = polygon.len() - 1;
-    for i in 0..polygon.len() {
-        let (a, b) = (polygon[i], polygon[j]);
-        if (a.y > p.y) != (b.y > p.y) && p.x < (b.x - a.x) * (p.y - a.y) / (b.y - a.y) + a.x {
-            result = !result;
-        }
-        j = i;
-    }
-    result
-}
-
 /// Intersection over union of the regions inside each polygon, rasterised on a 64 × 64 grid
 /// over their joint bounding box.
 fn region_overlaps(polygons: &[Vec<Point2<f64>>]) -> Vec<Vec<f64>> {
@@ -234,7 +210,7 @@ fn region_overlaps(polygons: &[Vec<Point2<f64>>]) -> Vec<Vec<f64>> {
                         lo.x + (hi.x - lo.x) * ((k % GRID) as f64 + 0.5) / GRID as f64,
                         lo.y + (hi.y - lo.y) * ((k / GRID) as f64 + 0.5) / GRID as f64,
                     );
-                    inside(&q, polygon)
+                    fit::inside_polygon(&q, polygon)
                 })
                 .collect()
         })
@@ -262,7 +238,7 @@ fn region_overlaps(polygons: &[Vec<Point2<f64>>]) -> Vec<Vec<f64>> {
 /// (seed 004 §6.2: "the largest region is used") among those consistent with the medoid
 /// (the region overlapping the others most). A boundary whose graph cut leaked into the
 /// background is large but disagrees with the rest, so it cannot win.
-fn consensus_region(regions: &[(usize, Vec<Point2<f64>>)]) -> Option<usize> {
+fn consensus_region(regions: &[(usize, Vec<Point2<f64>>)]) -> Option<(usize, f64)> {
     const CONSISTENT_IOU: f64 = 0.75;
     let polygons: Vec<Vec<Point2<f64>>> = regions.iter().map(|(_, p)| p.clone()).collect();
     let overlaps = region_overlaps(&polygons);
@@ -275,7 +251,19 @@ fn consensus_region(regions: &[(usize, Vec<Point2<f64>>)]) -> Option<usize> {
         .max_by(|&a, &b| {
             fit::polygon_area(&polygons[a]).total_cmp(&fit::polygon_area(&polygons[b]))
         })
-        .map(|i| regions[i].0)
+        .map(|i| {
+            let others = regions.len().saturating_sub(1);
+            let agreement = if others == 0 {
+                1.0
+            } else {
+                (0..regions.len())
+                    .filter(|&j| j != i)
+                    .map(|j| overlaps[i][j])
+                    .sum::<f64>()
+                    / others as f64
+            };
+            (regions[i].0, agreement)
+        })
 }
 
 /// Builds the generic leaf from a segment's boundary in a view: the boundary is back-projected
@@ -307,21 +295,7 @@ pub fn extract_template(
     let image = &session.scene().reconstruction.images()[source.view];
     let camera = session.scene().reconstruction.camera_of(image).clone();
     let camera_from_world = image.camera_from_world;
-    let world_from_camera = camera_from_world.inverse();
-    let origin = world_from_camera * Point3::origin();
-    let outline: Vec<Point2<f64>> = polygon
-        .iter()
-        .filter_map(|p| {
-            let ray = camera.unproject(&Point2::new(p[0], p[1]))?;
-            let direction = (world_from_camera.rotation * ray).normalize();
-            let denominator = direction.dot(&frame.normal);
-            if denominator.abs() < 0.15 {
-                return None;
-            }
-            let t = (frame.origin - origin).dot(&frame.normal) / denominator;
-            (t > 0.0).then(|| frame.to_plane(&(origin + direction * t)).0)
-        })
-        .collect();
+    let outline = plane_polygon(session, source.view, &polygon, &frame).unwrap_or_default();
     if outline.len() < 6 {
         return Err(bad("the view sees the leaf too obliquely".into()));
     }
@@ -337,31 +311,14 @@ pub fn extract_template(
             )
         },
     );
-    let mut photos = Photos {
-        cache: HashMap::new(),
-    };
-    let photo = photos.get(session, source.view).cloned();
+    let photo = load_photo(session, source.view);
     let size = texture_size.max(8);
-    let closed: Vec<[f64; 2]> = outline.iter().map(|p| [p.x, p.y]).collect();
     let texture = image::RgbaImage::from_fn(size, size, |i, j| {
         let q = Point2::new(
             lo.x + (i as f64 + 0.5) / size as f64 * (hi.x - lo.x),
             hi.y - (j as f64 + 0.5) / size as f64 * (hi.y - lo.y),
         );
-        let inside = {
-            let mut inside = false;
-            let n = closed.len();
-            for k in 0..n {
-                let (a, b) = (closed[k], closed[(k + 1) % n]);
-                if (a[1] > q.y) != (b[1] > q.y) {
-                    let x = a[0] + (q.y - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
-                    if q.x < x {
-                        inside = !inside;
-                    }
-                }
-            }
-            inside
-        };
+        let inside = fit::inside_polygon(&q, &outline);
         let world = frame.to_world(&q, heights.at(&q));
         let rgb = photo
             .as_ref()
@@ -376,51 +333,233 @@ pub fn extract_template(
     LeafTemplate::from_outline(&outline, texture).map_err(|e| bad(e.to_string()))
 }
 
-/// Chooses the generic leaf: among the largest leaf segments, the one whose best view sees it
-/// most frontally and whose boundary covers its projected points best.
-pub fn choose_template(
+/// The image boundary chosen for a leaf.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct BoundaryChoice {
+    pub view: usize,
+    /// Mean overlap (IoU on the leaf plane) of the chosen region with the other candidate
+    /// views' regions: 1 when they all agree; low for a leaf whose boundary is uncertain.
+    pub agreement: f64,
+    /// Area of the region in the image, pixels².
+    pub area_px: f64,
+    /// Area over convex-hull area of the region on the leaf plane (of the image polygon when
+    /// the plane is seen too obliquely): low for notched or merged-leaf outlines.
+    pub solidity: f64,
+}
+
+/// Image boundaries of leaf segments (seed 004 §5.4/§6.2): for each, the boundaries in its
+/// best views (most points seen, most frontal), the chosen one by [`consensus_region`].
+/// Superpixels and boundaries are computed in parallel; the boundaries are cached in the
+/// session.
+pub fn choose_boundaries(
     session: &mut Session,
+    segments: &[u32],
     plant: &PlantContext,
+    progress: &dyn Progress,
+) -> Result<HashMap<u32, BoundaryChoice>, LeafError> {
+    use rayon::prelude::*;
+    let shared: &Session = session;
+    let candidates: Vec<(u32, Option<fit::LeafFrame>, Vec<usize>)> = segments
+        .par_iter()
+        .map(|&segment| {
+            let points = segment_points(shared, segment);
+            let frame = leaf_frame(&points, plant).ok().map(|f| f.0);
+            let views = ranked_views(shared, segment, plant)
+                .into_iter()
+                .take(BOUNDARY_CANDIDATES)
+                .map(|(_, view)| view)
+                .collect();
+            (segment, frame, views)
+        })
+        .collect();
+    let mut views: Vec<usize> = candidates.iter().flat_map(|c| c.2.clone()).collect();
+    views.sort_unstable();
+    views.dedup();
+    progress.stage("superpixels", views.len() as u64);
+    views.par_iter().try_for_each(|&view| {
+        shared.prepare_views(&[view])?;
+        progress.advance(1);
+        Ok::<(), EditError>(())
+    })?;
+    progress.stage("leaf boundaries", segments.len() as u64);
+    type Regions = Vec<(usize, Vec<Point2<f64>>, Boundary)>;
+    let computed: Vec<(u32, Regions)> = candidates
+        .par_iter()
+        .map(|(segment, frame, views)| {
+            let mut regions = Vec::new();
+            for &view in views {
+                // A view where the graph cut finds nothing simply is not a candidate.
+                let Ok(boundary) = shared.boundary_in_view(*segment, view) else {
+                    continue;
+                };
+                let region = frame
+                    .as_ref()
+                    .and_then(|frame| plane_polygon(shared, view, &boundary.polygon, frame));
+                regions.push((view, region.unwrap_or_default(), boundary));
+            }
+            progress.advance(1);
+            (*segment, regions)
+        })
+        .collect();
+    let mut chosen = HashMap::new();
+    for (segment, regions) in computed {
+        let on_plane: Vec<(usize, Vec<Point2<f64>>)> = regions
+            .iter()
+            .filter(|r| r.1.len() >= 3)
+            .map(|r| (r.0, r.1.clone()))
+            .collect();
+        let choice = consensus_region(&on_plane).or_else(|| {
+            // Seen only too obliquely for the plane: the largest image region.
+            regions
+                .iter()
+                .max_by(|a, b| a.2.area_px.total_cmp(&b.2.area_px))
+                .map(|r| (r.0, 1.0))
+        });
+        if let Some((view, agreement)) = choice
+            && let Some(r) = regions.iter().find(|r| r.0 == view)
+        {
+            let solidity = if r.1.len() >= 3 {
+                fit::solidity(&r.1)
+            } else {
+                let image: Vec<Point2<f64>> =
+                    r.2.polygon
+                        .iter()
+                        .map(|p| Point2::new(p[0], p[1]))
+                        .collect();
+                fit::solidity(&image)
+            };
+            chosen.insert(
+                segment,
+                BoundaryChoice {
+                    view,
+                    agreement,
+                    area_px: r.2.area_px,
+                    solidity,
+                },
+            );
+        }
+        for (view, _, boundary) in regions {
+            session.store_boundary(segment, view, boundary);
+        }
+    }
+    Ok(chosen)
+}
+
+/// Chooses the generic leaf (seed 004 §6.1: a sample leaf): among the largest leaf segments
+/// with a boundary, the one seen most frontally in its chosen view, with the most points,
+/// the largest image region and the most solid boundary most consistent across views;
+/// segments over twice the median leaf segment's size are passed over while others remain.
+pub fn choose_template(
+    session: &Session,
+    plant: &PlantContext,
+    boundaries: &HashMap<u32, BoundaryChoice>,
 ) -> Result<TemplateSource, LeafError> {
-    let mut sizes: Vec<(usize, u32)> = session
+    let mut sizes: Vec<(usize, u32)> = boundaries
+        .keys()
+        .map(|&segment| (session.members(segment).len(), segment))
+        .filter(|(n, _)| *n >= 50)
+        .collect();
+    sizes.sort_by(|a, b| b.cmp(a));
+    // A segment far larger than the typical leaf is more likely two merged leaves than one
+    // large leaf: keep those out unless nothing else is left.
+    let mut leaf_sizes: Vec<usize> = session
         .segments()
         .iter()
         .enumerate()
         .filter(|(_, s)| s.is_some_and(|s| s.label == SegmentLabel::Leaf))
-        .map(|(id, _)| (session.members(id as u32).len(), id as u32))
-        .filter(|(n, _)| *n >= 50)
+        .map(|(id, _)| session.members(id as u32).len())
+        .filter(|&n| n > 0)
         .collect();
-    sizes.sort_by(|a, b| b.cmp(a));
+    leaf_sizes.sort_unstable();
+    if let Some(&median) = leaf_sizes.get(leaf_sizes.len() / 2) {
+        let typical: Vec<(usize, u32)> = sizes
+            .iter()
+            .copied()
+            .filter(|&(n, _)| n <= MAX_TEMPLATE_SIZE_RATIO * median)
+            .collect();
+        if !typical.is_empty() {
+            sizes = typical;
+        }
+    }
+    let images = session.scene().reconstruction.images();
     let mut best: Option<(f64, TemplateSource)> = None;
-    for &(count, segment) in sizes.iter().take(6) {
-        let Some(&(frontal, view)) = ranked_views(session, segment, plant).first() else {
+    for &(count, segment) in sizes.iter().take(TEMPLATE_CANDIDATES) {
+        let choice = boundaries[&segment];
+        let Ok((frame, _)) = leaf_frame(&segment_points(session, segment), plant) else {
             continue;
         };
-        let Ok(boundary) = session.compute_boundary(segment, view) else {
-            continue;
-        };
-        let cosine = frontal / count as f64;
-        let score = cosine * boundary.area_px.sqrt() * (count as f64).sqrt();
+        let ray = (frame.origin - images[choice.view].center_world()).normalize();
+        let cosine = ray.dot(&frame.normal).abs();
+        // Frontal, agreed on by the candidate views, whole (solid), and large.
+        let score = cosine
+            * choice.agreement
+            * choice.solidity.powi(2)
+            * choice.area_px.sqrt()
+            * (count as f64).sqrt();
         if best.is_none_or(|(s, _)| score > s) {
-            best = Some((score, TemplateSource { segment, view }));
+            best = Some((
+                score,
+                TemplateSource {
+                    segment,
+                    view: choice.view,
+                },
+            ));
         }
     }
     best.map(|(_, source)| source).ok_or(LeafError::NoTemplate)
 }
 
-/// Reconstructs every leaf segment of the session (seed 004 §6.2).
+/// How many of the largest leaves compete to be the generic leaf.
+const TEMPLATE_CANDIDATES: usize = 6;
+
+/// Segments with more than this many times the median leaf segment's points do not compete
+/// to be the generic leaf (likely merged leaves).
+const MAX_TEMPLATE_SIZE_RATIO: usize = 2;
+
+/// Reconstructs every leaf segment of the session (seed 004 §6.2): boundaries, generic leaf,
+/// then the fits, in parallel, grouped by the view whose photo textures them (one photo in
+/// memory per worker).
 pub fn reconstruct_leaves(
     session: &mut Session,
     options: &LeafOptions,
     progress: &dyn Progress,
 ) -> Result<LeafReconstruction, LeafError> {
+    use rayon::prelude::*;
     let plant = plant_context(session);
     let mut timings = LeafTimings::default();
+    let leaf_segments: Vec<u32> = session
+        .segments()
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.is_some_and(|s| s.label == SegmentLabel::Leaf))
+        .map(|(id, _)| id as u32)
+        .filter(|&id| !session.members(id).is_empty())
+        .collect();
+
+    let clock = Instant::now();
+    let boundaries = if options.fit.use_boundary {
+        choose_boundaries(session, &leaf_segments, &plant, progress)?
+    } else {
+        // Only the generic leaf needs a boundary.
+        let mut largest: Vec<(usize, u32)> = leaf_segments
+            .iter()
+            .map(|&s| (session.members(s).len(), s))
+            .collect();
+        largest.sort_by(|a, b| b.cmp(a));
+        let some: Vec<u32> = largest
+            .iter()
+            .take(TEMPLATE_CANDIDATES)
+            .map(|&(_, s)| s)
+            .collect();
+        choose_boundaries(session, &some, &plant, progress)?
+    };
+    timings.boundaries = clock.elapsed().as_secs_f64();
+
     progress.stage("generic leaf", 0);
     let clock = Instant::now();
     let source = match options.template {
         Some(source) => Some(source),
-        None => choose_template(session, &plant).ok(),
+        None => choose_template(session, &plant, &boundaries).ok(),
     };
     let template = match source {
         Some(source) => extract_template(session, source, &plant, 256)?,
@@ -443,89 +582,87 @@ pub fn reconstruct_leaves(
     };
     timings.template = clock.elapsed().as_secs_f64();
 
-    let leaf_segments: Vec<u32> = session
-        .segments()
-        .iter()
-        .enumerate()
-        .filter(|(_, s)| s.is_some_and(|s| s.label == SegmentLabel::Leaf))
-        .map(|(id, _)| id as u32)
-        .filter(|&id| !session.members(id).is_empty())
-        .collect();
-    progress.stage("leaf boundaries", leaf_segments.len() as u64);
-    let clock = Instant::now();
-    let mut boundary_views: HashMap<u32, usize> = HashMap::new();
-    if options.fit.use_boundary {
-        for &segment in &leaf_segments {
-            // Of the views that see the leaf best, the one whose region is largest on the
-            // leaf's plane (seed 004: "the largest region is used"): occluded views lose.
-            let points = segment_points(session, segment);
-            let frame = leaf_frame(&points, &plant).ok().map(|f| f.0);
-            let mut regions = Vec::new();
-            let mut fallback = None;
-            for (_, view) in ranked_views(session, segment, &plant)
-                .into_iter()
-                .take(BOUNDARY_CANDIDATES)
-            {
-                let Ok(boundary) = session.compute_boundary(segment, view) else {
-                    continue;
-                };
-                let polygon = boundary.polygon.clone();
-                fallback.get_or_insert(view);
-                if let Some(frame) = &frame
-                    && let Some(region) = plane_polygon(session, view, &polygon, frame)
-                {
-                    regions.push((view, region));
-                }
-            }
-            if let Some(view) = consensus_region(&regions).or(fallback) {
-                boundary_views.insert(segment, view);
-            }
-            progress.advance(1);
-        }
-    }
-    timings.boundaries = clock.elapsed().as_secs_f64();
-
     progress.stage("fitting leaves", leaf_segments.len() as u64);
     let clock = Instant::now();
-    let mut photos = Photos {
-        cache: HashMap::new(),
-    };
+    let mut by_view: std::collections::BTreeMap<Option<usize>, Vec<(usize, u32)>> =
+        std::collections::BTreeMap::new();
+    for (order, &segment) in leaf_segments.iter().enumerate() {
+        let view = options
+            .fit
+            .use_boundary
+            .then(|| boundaries.get(&segment).map(|c| c.view))
+            .flatten();
+        by_view.entry(view).or_default().push((order, segment));
+    }
+    /// Segments in fitting order that share one boundary view (one photo load per group).
+    type ViewGroup = (Option<usize>, Vec<(usize, u32)>);
+    /// One segment's fit, with the order it was listed in.
+    struct Outcome {
+        order: usize,
+        segment: u32,
+        view: Option<usize>,
+        points: usize,
+        fitted: Result<FittedLeaf, FitError>,
+    }
+    let groups: Vec<ViewGroup> = by_view.into_iter().collect();
+    let shared: &Session = session;
+    let model = &shared.scene().reconstruction;
+    let mut results: Vec<Outcome> = groups
+        .par_iter()
+        .flat_map_iter(|(view, members)| {
+            let photo = view.and_then(|v| load_photo(shared, v));
+            members
+                .iter()
+                .map(|&(order, segment)| {
+                    let points = segment_points(shared, segment);
+                    let boundary_view = view.and_then(|v| {
+                        let boundary = shared.boundary(segment, v)?;
+                        Some(BoundaryView {
+                            polygon: &boundary.polygon,
+                            camera: model.camera_of(&model.images()[v]),
+                            camera_from_world: model.images()[v].camera_from_world,
+                            image: photo.as_ref(),
+                        })
+                    });
+                    let fitted = fit_leaf(
+                        &points,
+                        &template,
+                        &plant,
+                        boundary_view.as_ref(),
+                        &options.fit,
+                    );
+                    progress.advance(1);
+                    Outcome {
+                        order,
+                        segment,
+                        view: *view,
+                        points: points.len(),
+                        fitted,
+                    }
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    results.sort_by_key(|r| r.order);
     let mut leaves = Vec::new();
     let mut skipped = Vec::new();
-    for &segment in &leaf_segments {
-        let points = segment_points(session, segment);
-        let view = boundary_views.get(&segment).copied();
-        let photo = view.and_then(|v| photos.get(session, v).cloned());
-        let result = {
-            let boundary = view.and_then(|v| session.boundary(segment, v));
-            let model = &session.scene().reconstruction;
-            let boundary_view = match (view, boundary) {
-                (Some(v), Some(b)) => Some(BoundaryView {
-                    polygon: &b.polygon,
-                    camera: model.camera_of(&model.images()[v]),
-                    camera_from_world: model.images()[v].camera_from_world,
-                    image: photo.as_ref(),
-                }),
-                _ => None,
-            };
-            fit_leaf(
-                &points,
-                &template,
-                &plant,
-                boundary_view.as_ref(),
-                &options.fit,
-            )
-        };
-        match result {
+    for Outcome {
+        segment,
+        view,
+        points,
+        fitted,
+        ..
+    } in results
+    {
+        match fitted {
             Ok(fit) => leaves.push(ReconstructedLeaf { segment, view, fit }),
             Err(e) => skipped.push(SkippedLeaf {
                 segment,
-                points: points.len(),
+                points,
                 for_branch_stage: matches!(e, FitError::TooFewPoints(_)),
                 reason: e.to_string(),
             }),
         }
-        progress.advance(1);
     }
     timings.fitting = clock.elapsed().as_secs_f64();
     Ok(LeafReconstruction {
