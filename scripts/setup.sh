@@ -36,17 +36,44 @@ for pkg in "${PACKAGES[@]}"; do
   fi
 done
 
-if [ "${#missing[@]}" -eq 0 ]; then
-  echo "setup.sh: all system packages present"
-  exit 0
+# Export checks need Node (the Khronos glTF validator) and pip (a Python glTF reader); a Node
+# from elsewhere (e.g. NodeSource, which bundles npm) is used as it is.
+if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then
+  missing+=(nodejs npm)
+fi
+if ! command -v python3 >/dev/null 2>&1 || ! python3 -m pip --version >/dev/null 2>&1; then
+  missing+=(python3 python3-pip)
 fi
 
-echo "setup.sh: installing ${missing[*]}"
-log="$(mktemp -t frond-setup.XXXXXX.log)"
-export DEBIAN_FRONTEND=noninteractive
-if ! { as_root apt-get update -q && as_root apt-get install -y -q --no-install-recommends "${missing[@]}"; } >"$log" 2>&1; then
-  echo "setup.sh: apt-get failed; last lines of $log:" >&2
-  tail -n 40 "$log" >&2
-  exit 1
+if [ "${#missing[@]}" -eq 0 ]; then
+  echo "setup.sh: all system packages present"
+else
+  echo "setup.sh: installing ${missing[*]}"
+  log="$(mktemp -t frond-setup.XXXXXX.log)"
+  export DEBIAN_FRONTEND=noninteractive
+  if ! { as_root apt-get update -q && as_root apt-get install -y -q --no-install-recommends "${missing[@]}"; } >"$log" 2>&1; then
+    echo "setup.sh: apt-get failed; last lines of $log:" >&2
+    tail -n 40 "$log" >&2
+    exit 1
+  fi
+  echo "setup.sh: system packages done (log: $log)"
 fi
-echo "setup.sh: done (log: $log)"
+
+# Project-local tools in .tools/ (git-ignored), pinned: the Khronos glTF validator and
+# pygltflib, used by the export tests through scripts/validate_gltf.js and scripts/read_gltf.py.
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+GLTF_VALIDATOR_VERSION="2.0.0-dev.3.10"
+PYGLTFLIB_VERSION="1.16.5"
+validator_json="$root/.tools/npm/node_modules/gltf-validator/package.json"
+if ! grep -q "\"version\": \"$GLTF_VALIDATOR_VERSION\"" "$validator_json" 2>/dev/null; then
+  echo "setup.sh: installing gltf-validator $GLTF_VALIDATOR_VERSION into .tools/npm"
+  npm install --silent --prefix "$root/.tools/npm" --no-audit --no-fund --no-save \
+    "gltf-validator@$GLTF_VALIDATOR_VERSION"
+fi
+if ! [ -d "$root/.tools/py/pygltflib-$PYGLTFLIB_VERSION.dist-info" ]; then
+  echo "setup.sh: installing pygltflib $PYGLTFLIB_VERSION into .tools/py"
+  rm -rf "$root/.tools/py"
+  python3 -m pip install --quiet --disable-pip-version-check --no-warn-script-location --root-user-action=ignore \
+    --target "$root/.tools/py" "pygltflib==$PYGLTFLIB_VERSION"
+fi
+echo "setup.sh: done"

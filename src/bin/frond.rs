@@ -482,6 +482,7 @@ fn reconstruct(
         },
         "template": leaves.template_source,
         "skipped": leaves.skipped,
+        "unusable_views": leaves.unusable_views,
         "leaves": leaves.leaves.iter().map(|l| serde_json::json!({
             "segment": l.segment,
             "view": l.view.map(|v| session.scene().reconstruction.images()[v].id),

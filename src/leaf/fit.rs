@@ -24,7 +24,8 @@ pub struct LeafFitOptions {
     /// Share of correspondences kept in each direction, the closest ones (trimmed ICP):
     /// notches an occluder cuts into the image boundary do not pull the outline in.
     pub icp_inlier_share: f64,
-    /// Texture tile size (texels).
+    /// Largest texture tile (texels); a leaf gets the power of two that matches its size in
+    /// the photo it is textured from (at least 16), no more.
     pub texture_size: u32,
 }
 
@@ -484,7 +485,51 @@ fn back_project(
         return None;
     }
     let t = (frame.origin - origin).dot(&frame.normal) / denominator;
-    (t > 0.0).then(|| frame.to_plane(&(origin + direction * t)).0)
+    let q = frame.to_plane(&(origin + direction * t)).0;
+    (t > 0.0 && q.x.is_finite() && q.y.is_finite()).then_some(q)
+}
+
+/// Texels per side for a leaf's texture: about one texel per photo pixel along the leaf's
+/// longer side (rounded up to a power of two, 16 to `max_size`); `max_size` without a photo.
+fn texture_size_for(
+    frame: &LeafFrame,
+    affine: &Affine2,
+    template: &LeafTemplate,
+    boundary: Option<&BoundaryView<'_>>,
+    max_size: u32,
+) -> u32 {
+    let max_size = max_size.max(16);
+    let Some(view) = boundary.filter(|b| b.image.is_some()) else {
+        return max_size;
+    };
+    let (lo, hi) = (template.texture_min, template.texture_max);
+    let corners = [
+        Point2::new(lo.x, lo.y),
+        Point2::new(hi.x, lo.y),
+        Point2::new(hi.x, hi.y),
+        Point2::new(lo.x, hi.y),
+    ];
+    let pixels: Option<Vec<Point2<f64>>> = corners
+        .iter()
+        .map(|c| {
+            let world = frame.to_world(&affine.apply(c), 0.0);
+            view.camera
+                .project(&(view.camera_from_world * world).coords)
+        })
+        .collect();
+    let Some(pixels) = pixels else {
+        return max_size;
+    };
+    // Longer side of the texture rectangle as seen in the photo.
+    let side = |a: usize, b: usize| (pixels[a] - pixels[b]).norm();
+    let longest = side(0, 1).max(side(1, 2)).max(side(2, 3)).max(side(3, 0));
+    if !longest.is_finite() {
+        return max_size;
+    }
+    (longest.ceil().max(1.0) as u32)
+        .checked_next_power_of_two()
+        .unwrap_or(max_size)
+        .clamp(16, max_size)
 }
 
 fn sample_rgb(image: &image::RgbImage, pixel: &Point2<f64>) -> Option<[u8; 3]> {
@@ -586,8 +631,20 @@ pub fn fit_leaf(
     boundary: Option<&BoundaryView<'_>>,
     options: &LeafFitOptions,
 ) -> Result<FittedLeaf, FitError> {
-    let (frame, _) = leaf_frame(points, plant)?;
     let mut notes = Vec::new();
+    let finite: Vec<Point3<f64>> = points
+        .iter()
+        .copied()
+        .filter(|p| p.coords.iter().all(|c| c.is_finite()))
+        .collect();
+    if finite.len() < points.len() {
+        notes.push(format!(
+            "{} non-finite points ignored",
+            points.len() - finite.len()
+        ));
+    }
+    let points = &finite[..];
+    let (frame, _) = leaf_frame(points, plant)?;
     let samples: Vec<(Point2<f64>, f64)> = points.iter().map(|p| frame.to_plane(p)).collect();
     // Flat fit: scale the template to the points' extent along the two axes.
     let mut xs: Vec<f64> = samples.iter().map(|s| s.0.x).collect();
@@ -624,7 +681,18 @@ pub fn fit_leaf(
             .iter()
             .filter_map(|p| back_project(&Point2::new(p[0], p[1]), view, &frame))
             .collect();
-        if projected.len() >= 8 && projected.len() * 10 >= view.polygon.len() * 8 {
+        let flat_area = affine.matrix.determinant().abs() * template.area();
+        if view.polygon.len() < 3 {
+            notes.push(format!(
+                "boundary has {} vertices: no warp",
+                view.polygon.len()
+            ));
+        } else if projected.len() >= 8
+            && projected.len() * 10 >= view.polygon.len() * 8
+            && polygon_area(&projected) < 0.05 * flat_area
+        {
+            notes.push("boundary encloses almost no area on the leaf plane: no warp".into());
+        } else if projected.len() >= 8 && projected.len() * 10 >= view.polygon.len() * 8 {
             let dense = super::template::resample(
                 &{
                     let mut closed = projected.clone();
@@ -674,7 +742,7 @@ pub fn fit_leaf(
     mesh.compute_normals();
 
     // Texture: the photo where the boundary region sees the leaf, else the generic texture.
-    let size = options.texture_size.max(8);
+    let size = texture_size_for(&frame, &affine, template, boundary, options.texture_size);
     let mut texture = image::RgbaImage::new(size, size);
     let mut from_photo = 0usize;
     let extent = template.texture_max - template.texture_min;
@@ -858,5 +926,161 @@ mod tests {
         assert!(leaf_frame(&points[..2], &plant).is_err());
         let line: Vec<Point3<f64>> = (0..10).map(|k| Point3::new(k as f64, 0.0, 0.0)).collect();
         assert_eq!(leaf_frame(&line, &plant).unwrap_err(), FitError::Degenerate);
+    }
+
+    /// A tilted elliptic leaf 0.1 m x 0.04 m, 15 cm east of the axis, as points; a camera
+    /// above it looking down, and the ellipse's outline as the image boundary.
+    fn leaf_scene() -> (
+        Vec<Point3<f64>>,
+        crate::scene::Camera,
+        nalgebra::Isometry3<f64>,
+    ) {
+        let mut rng = Rng::seed_from(5);
+        let points = (0..400)
+            .filter_map(|_| {
+                let (u, v) = (rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+                (u * u + v * v <= 1.0)
+                    .then(|| Point3::new(0.15 + 0.05 * u, 0.02 * v, 0.3 + 0.01 * u))
+            })
+            .collect();
+        let camera = crate::scene::Camera::simple_pinhole(1, 800, 600, 900.0);
+        // Camera 0.5 m above the leaf looking straight down (camera z = world −z).
+        let camera_from_world = nalgebra::Isometry3::from_parts(
+            nalgebra::Translation3::new(-0.15, 0.0, 0.8),
+            nalgebra::UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
+        );
+        (points, camera, camera_from_world)
+    }
+
+    fn ellipse_template() -> LeafTemplate {
+        let outline: Vec<Point2<f64>> = (0..64)
+            .map(|k| {
+                let t = std::f64::consts::TAU * k as f64 / 64.0;
+                Point2::new(0.5 + 0.5 * t.cos(), 0.2 * t.sin())
+            })
+            .collect();
+        LeafTemplate::from_outline(&outline, LeafTemplate::plain_texture(32)).unwrap()
+    }
+
+    fn plant() -> PlantContext {
+        PlantContext {
+            up: Vector3::z(),
+            axis_point: Point3::origin(),
+        }
+    }
+
+    #[test]
+    fn boundary_warp_recovers_the_outline_area() {
+        let (points, camera, camera_from_world) = leaf_scene();
+        let polygon: Vec<[f64; 2]> = (0..100)
+            .map(|k| {
+                let t = std::f64::consts::TAU * k as f64 / 100.0;
+                let p = Point3::new(0.15 + 0.05 * t.cos(), 0.02 * t.sin(), 0.3 + 0.01 * t.cos());
+                let pixel = camera.project(&(camera_from_world * p).coords).unwrap();
+                [pixel.x, pixel.y]
+            })
+            .collect();
+        let photo = image::RgbImage::from_pixel(800, 600, image::Rgb([10, 200, 30]));
+        let view = BoundaryView {
+            polygon: &polygon,
+            camera: &camera,
+            camera_from_world,
+            image: Some(&photo),
+        };
+        let options = LeafFitOptions::default();
+        let fit = fit_leaf(
+            &points,
+            &ellipse_template(),
+            &plant(),
+            Some(&view),
+            &options,
+        )
+        .unwrap();
+        let truth = std::f64::consts::PI * 0.05 * 0.02 * (1.0f64 + 0.04).sqrt();
+        assert!(fit.icp.is_some(), "{:?}", fit.notes);
+        assert!(
+            (fit.outline_area / truth - 1.0).abs() < 0.06,
+            "outline {} vs {truth}",
+            fit.outline_area
+        );
+        assert!(fit.textured_fraction > 0.5);
+        let texel = fit
+            .texture
+            .get_pixel(fit.texture.width() / 2, fit.texture.height() / 2);
+        assert_eq!((texel[0], texel[1], texel[2]), (10, 200, 30));
+        // About one texel per photo pixel: the leaf spans ~90 px here.
+        assert_eq!(fit.texture.width(), 128);
+        assert!(
+            fit.mesh
+                .positions
+                .iter()
+                .all(|p| p.iter().all(|c| c.is_finite()))
+        );
+    }
+
+    #[test]
+    fn bad_input_is_refused_or_noted_never_a_panic() {
+        let (points, camera, camera_from_world) = leaf_scene();
+        let template = ellipse_template();
+        let options = LeafFitOptions::default();
+        let fit = |points: &[Point3<f64>], view: Option<&BoundaryView<'_>>| {
+            fit_leaf(points, &template, &plant(), view, &options)
+        };
+        // Too few points: left for the branch stage.
+        for n in 0..3 {
+            assert_eq!(
+                fit(&points[..n], None).unwrap_err(),
+                FitError::TooFewPoints(n)
+            );
+        }
+        // Collinear and coincident points: no plane.
+        let line: Vec<Point3<f64>> = (0..30)
+            .map(|k| Point3::new(0.1 + 0.01 * k as f64, 0.0, 0.3))
+            .collect();
+        assert_eq!(fit(&line, None).unwrap_err(), FitError::Degenerate);
+        let same = vec![Point3::new(0.1, 0.2, 0.3); 20];
+        assert_eq!(fit(&same, None).unwrap_err(), FitError::Degenerate);
+        // Non-finite points are dropped and noted; too few finite ones is too few points.
+        let mut noisy = points.clone();
+        noisy[3] = Point3::new(f64::NAN, 0.0, 0.0);
+        noisy[7] = Point3::new(0.0, f64::INFINITY, 0.0);
+        let fitted = fit(&noisy, None).unwrap();
+        assert!(fitted.notes.iter().any(|n| n.contains("2 non-finite")));
+        let nan = [Point3::new(f64::NAN, 0.0, 0.0); 5];
+        assert_eq!(fit(&nan, None).unwrap_err(), FitError::TooFewPoints(0));
+        // Open or empty boundaries, a boundary of NaNs, one behind the camera, and no photo:
+        // the leaf is still posed from its points, and the note says why the warp was skipped.
+        let open = [[400.0, 300.0], [420.0, 310.0]];
+        let flat: Vec<[f64; 2]> = (0..20).map(|k| [300.0 + 10.0 * k as f64, 300.0]).collect();
+        let nans = vec![[f64::NAN, 1.0]; 20];
+        let behind_pose = nalgebra::Isometry3::translation(0.0, 0.0, -2.0) * camera_from_world;
+        for (polygon, pose, expected) in [
+            (&open[..], camera_from_world, "2 vertices"),
+            (&flat[..], camera_from_world, "no area"),
+            (&nans[..], camera_from_world, "oblique"),
+            (&flat[..], behind_pose, "oblique"),
+        ] {
+            let view = BoundaryView {
+                polygon,
+                camera: &camera,
+                camera_from_world: pose,
+                image: None,
+            };
+            let fitted = fit(&points, Some(&view)).unwrap();
+            assert!(fitted.icp.is_none());
+            assert!(
+                fitted.notes.iter().any(|n| n.contains(expected)),
+                "{expected}: {:?}",
+                fitted.notes
+            );
+            assert_eq!(fitted.textured_fraction, 0.0);
+            assert!(
+                fitted
+                    .mesh
+                    .positions
+                    .iter()
+                    .all(|p| p.iter().all(|c| c.is_finite()))
+            );
+        }
     }
 }

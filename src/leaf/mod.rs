@@ -9,7 +9,7 @@
 pub mod fit;
 pub mod template;
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::time::Instant;
 
 use nalgebra::{Point2, Point3};
@@ -22,6 +22,7 @@ pub use template::LeafTemplate;
 
 use crate::edit::{EditError, Session};
 use crate::graph::pipeline::SegmentLabel;
+use crate::scene::ImageFileStatus;
 use crate::segment::boundary::Boundary;
 use crate::util::progress::Progress;
 
@@ -76,6 +77,8 @@ pub struct LeafReconstruction {
     pub template: LeafTemplate,
     pub leaves: Vec<ReconstructedLeaf>,
     pub skipped: Vec<SkippedLeaf>,
+    /// Views whose photos could not be used for boundaries or textures, and why.
+    pub unusable_views: Vec<UnusableView>,
     pub timings: LeafTimings,
 }
 
@@ -333,6 +336,22 @@ pub fn extract_template(
     LeafTemplate::from_outline(&outline, texture).map_err(|e| bad(e.to_string()))
 }
 
+/// A view left out of the leaf stage because its photo cannot be used.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct UnusableView {
+    pub view: usize,
+    pub image_id: u32,
+    pub reason: String,
+}
+
+/// The boundaries chosen for a set of leaf segments.
+#[derive(Clone, Debug, Default)]
+pub struct BoundaryChoices {
+    pub chosen: HashMap<u32, BoundaryChoice>,
+    /// Views without a usable photo (missing, unreadable, wrong size), skipped.
+    pub unusable_views: Vec<UnusableView>,
+}
+
 /// The image boundary chosen for a leaf.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct BoundaryChoice {
@@ -356,31 +375,70 @@ pub fn choose_boundaries(
     segments: &[u32],
     plant: &PlantContext,
     progress: &dyn Progress,
-) -> Result<HashMap<u32, BoundaryChoice>, LeafError> {
+) -> Result<BoundaryChoices, LeafError> {
     use rayon::prelude::*;
     let shared: &Session = session;
-    let candidates: Vec<(u32, Option<fit::LeafFrame>, Vec<usize>)> = segments
+    // Views whose photo is missing, unreadable or of the wrong size take no part (checked from
+    // the file header; a photo that then fails to decode is dropped below).
+    let images = shared.scene().reconstruction.images();
+    let mut unusable: BTreeMap<usize, String> = images
+        .par_iter()
+        .enumerate()
+        .filter_map(
+            |(view, image)| match shared.scene().image_file_status(image) {
+                ImageFileStatus::Present => None,
+                status => Some((view, format!("{}: {status:?}", image.name))),
+            },
+        )
+        .collect();
+    let ranked: Vec<(u32, Option<fit::LeafFrame>, Vec<usize>)> = segments
         .par_iter()
         .map(|&segment| {
             let points = segment_points(shared, segment);
             let frame = leaf_frame(&points, plant).ok().map(|f| f.0);
             let views = ranked_views(shared, segment, plant)
                 .into_iter()
-                .take(BOUNDARY_CANDIDATES)
                 .map(|(_, view)| view)
+                .filter(|view| !unusable.contains_key(view))
+                .take(BOUNDARY_CANDIDATES)
                 .collect();
             (segment, frame, views)
         })
         .collect();
-    let mut views: Vec<usize> = candidates.iter().flat_map(|c| c.2.clone()).collect();
+    let mut views: Vec<usize> = ranked.iter().flat_map(|c| c.2.clone()).collect();
     views.sort_unstable();
     views.dedup();
     progress.stage("superpixels", views.len() as u64);
-    views.par_iter().try_for_each(|&view| {
-        shared.prepare_views(&[view])?;
-        progress.advance(1);
-        Ok::<(), EditError>(())
-    })?;
+    let failed: Vec<(usize, String)> = views
+        .par_iter()
+        .filter_map(|&view| {
+            let result = shared.prepare_views(&[view]);
+            progress.advance(1);
+            result.err().map(|e| (view, e.to_string()))
+        })
+        .collect();
+    for (view, reason) in failed {
+        tracing::warn!("view {view} left out of the leaf boundaries: {reason}");
+        unusable.insert(view, reason);
+    }
+    let unusable_views: Vec<UnusableView> = unusable
+        .iter()
+        .map(|(&view, reason)| UnusableView {
+            view,
+            image_id: images[view].id,
+            reason: reason.clone(),
+        })
+        .collect();
+    let candidates: Vec<(u32, Option<fit::LeafFrame>, Vec<usize>)> = ranked
+        .into_iter()
+        .map(|(segment, frame, views)| {
+            let views = views
+                .into_iter()
+                .filter(|view| !unusable.contains_key(view))
+                .collect();
+            (segment, frame, views)
+        })
+        .collect();
     progress.stage("leaf boundaries", segments.len() as u64);
     type Regions = Vec<(usize, Vec<Point2<f64>>, Boundary)>;
     let computed: Vec<(u32, Regions)> = candidates
@@ -442,7 +500,10 @@ pub fn choose_boundaries(
             session.store_boundary(segment, view, boundary);
         }
     }
-    Ok(chosen)
+    Ok(BoundaryChoices {
+        chosen,
+        unusable_views,
+    })
 }
 
 /// Chooses the generic leaf (seed 004 §6.1: a sample leaf): among the largest leaf segments
@@ -559,7 +620,7 @@ pub fn reconstruct_leaves(
     let clock = Instant::now();
     let source = match options.template {
         Some(source) => Some(source),
-        None => choose_template(session, &plant, &boundaries).ok(),
+        None => choose_template(session, &plant, &boundaries.chosen).ok(),
     };
     let template = match source {
         Some(source) => extract_template(session, source, &plant, 256)?,
@@ -590,7 +651,7 @@ pub fn reconstruct_leaves(
         let view = options
             .fit
             .use_boundary
-            .then(|| boundaries.get(&segment).map(|c| c.view))
+            .then(|| boundaries.chosen.get(&segment).map(|c| c.view))
             .flatten();
         by_view.entry(view).or_default().push((order, segment));
     }
@@ -670,6 +731,7 @@ pub fn reconstruct_leaves(
         template,
         leaves,
         skipped,
+        unusable_views: boundaries.unusable_views,
         timings,
     })
 }

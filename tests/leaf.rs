@@ -1,0 +1,271 @@
+//! Leaf reconstruction end to end through the CLI on a small synthetic plant: `frond
+//! reconstruct` then `frond eval`; the exported glb passes the Khronos glTF validator and
+//! opens in a Python glTF reader; missing photos and broken files make notes or clear errors,
+//! never a crash.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
+
+use assert_cmd::cargo::cargo_bin_cmd;
+use frond::synth::{Preset, SynthOptions, write_dataset};
+use frond::util::progress::NoProgress;
+use serde_json::Value;
+use tempfile::TempDir;
+
+/// One small broadleaf dataset (a seed not used for tuning) shared by the tests of this file.
+fn dataset() -> &'static Path {
+    static DIR: OnceLock<TempDir> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let options = SynthOptions {
+            preset: Preset::Broadleaf,
+            seed: 11,
+            views: 16,
+            width: 480,
+            height: 360,
+            target_points: 30_000,
+            ..SynthOptions::default()
+        };
+        write_dataset(&options, &dir.path().join("plant"), &NoProgress).unwrap();
+        dir
+    })
+    .path()
+    .join("plant")
+    .leak()
+}
+
+/// `frond reconstruct` of the shared dataset, once.
+fn reconstruction() -> &'static Path {
+    static DIR: OnceLock<TempDir> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let out = tempfile::tempdir().unwrap();
+        cargo_bin_cmd!("frond")
+            .arg("reconstruct")
+            .arg(dataset())
+            .arg("--out")
+            .arg(out.path())
+            .assert()
+            .success();
+        out
+    })
+    .path()
+}
+
+fn read_json(path: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+fn repo_file(relative: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(relative)
+}
+
+/// Runs a checker script; its absence on this machine is a failure (scripts/setup.sh
+/// installs the tools into .tools/).
+fn run_checker(program: &str, script: &str, file: &Path) -> (bool, String) {
+    let output = Command::new(program)
+        .arg(repo_file(script))
+        .arg(file)
+        .output()
+        .unwrap_or_else(|e| panic!("{program} does not run ({e}): run scripts/setup.sh"));
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert_ne!(
+        output.status.code(),
+        Some(2),
+        "{script} could not start: {text}"
+    );
+    (output.status.success(), text)
+}
+
+#[test]
+fn reconstruct_writes_every_output_and_a_report() {
+    let out = reconstruction();
+    for file in [
+        "plant.glb",
+        "plant.obj",
+        "plant.mtl",
+        "plant_atlas_0.png",
+        "segmentation.ply",
+        "segments.json",
+        "report.json",
+    ] {
+        assert!(out.join(file).is_file(), "{file} missing");
+    }
+    let report = read_json(&out.join("report.json"));
+    let counts = &report["counts"];
+    let fitted = counts["leaves_fitted"].as_u64().unwrap();
+    assert!(fitted >= 8, "{counts}");
+    assert_eq!(report["leaves"].as_array().unwrap().len() as u64, fitted);
+    assert!(report["timings"]["total"].as_f64().unwrap() > 0.0);
+    assert!(report["timings"]["leaves"]["fitting"].as_f64().unwrap() > 0.0);
+    assert!(report["segmentation"]["timings"]["total"].as_f64().unwrap() > 0.0);
+    assert!(report["unusable_views"].as_array().unwrap().is_empty());
+    assert!(report["parameters"]["leaves"]["fit"]["icp_tolerance"].is_number());
+    // The OBJ's faces index existing vertices and use the atlas material.
+    let obj = std::fs::read_to_string(out.join("plant.obj")).unwrap();
+    let vertices = obj.lines().filter(|l| l.starts_with("v ")).count();
+    let max_index = obj
+        .lines()
+        .filter(|l| l.starts_with("f "))
+        .flat_map(|l| l.split_whitespace().skip(1))
+        .map(|corner| corner.split('/').next().unwrap().parse::<usize>().unwrap())
+        .max()
+        .unwrap();
+    assert!(max_index <= vertices);
+    assert!(obj.contains("usemtl leaf_atlas_0"));
+}
+
+#[test]
+fn reconstructed_leaves_meet_the_accuracy_targets() {
+    let out = reconstruction();
+    let output = cargo_bin_cmd!("frond")
+        .args(["eval", "--json", "--gt"])
+        .arg(dataset())
+        .arg("--pred")
+        .arg(out)
+        .output()
+        .unwrap();
+    assert!(output.status.success());
+    let eval: Value = serde_json::from_slice(&output.stdout).unwrap();
+    let recall = eval["leaves"]["recall"].as_f64().unwrap();
+    let chamfer = eval["chamfer_relative"]["median"].as_f64().unwrap();
+    let area = eval["area_relative_error"]["median"].as_f64().unwrap();
+    eprintln!("recall {recall:.3}, median Chamfer {chamfer:.4}, median area error {area:.3}");
+    assert!(recall >= 0.9, "recall {recall}");
+    // The broadleaf targets: median Chamfer ≤ 2 % of leaf length, area error ≤ 10 %.
+    assert!(chamfer <= 0.02, "median Chamfer {chamfer}");
+    assert!(area <= 0.10, "median area error {area}");
+}
+
+#[test]
+fn exported_glb_passes_the_khronos_validator_and_a_python_reader() {
+    let glb = reconstruction().join("plant.glb");
+    let (valid, text) = run_checker("node", "scripts/validate_gltf.js", &glb);
+    assert!(valid, "validator: {text}");
+    assert!(text.contains(": 0 errors"), "{text}");
+    let (read, text) = run_checker("python3", "scripts/read_gltf.py", &glb);
+    assert!(read, "reader: {text}");
+    let summary: Value = serde_json::from_str(text.trim()).unwrap();
+    let nodes: Vec<&str> = summary["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| n.as_str().unwrap())
+        .collect();
+    assert!(!nodes.is_empty() && nodes.iter().all(|n| n.starts_with("leaf_")));
+    assert!(summary["images"].as_u64().unwrap() >= 1);
+    assert!(summary["triangles"].as_u64().unwrap() > 100);
+}
+
+#[test]
+fn the_checkers_catch_a_broken_glb() {
+    let glb = std::fs::read(reconstruction().join("plant.glb")).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    // Point the first index accessor's count far past its buffer view.
+    let json_length = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
+    let mut json: Value = serde_json::from_slice(&glb[20..20 + json_length]).unwrap();
+    let index = json["meshes"][0]["primitives"][0]["indices"]
+        .as_u64()
+        .unwrap() as usize;
+    json["accessors"][index]["count"] = Value::from(3_000_000u64);
+    let mut text = serde_json::to_vec(&json).unwrap();
+    while !text.len().is_multiple_of(4) {
+        text.push(b' ');
+    }
+    let mut broken = glb[..12].to_vec();
+    broken.extend_from_slice(&(text.len() as u32).to_le_bytes());
+    broken.extend_from_slice(&glb[16..20]);
+    broken.extend_from_slice(&text);
+    broken.extend_from_slice(&glb[20 + json_length..]);
+    let total = broken.len() as u32;
+    broken[8..12].copy_from_slice(&total.to_le_bytes());
+    let path = dir.path().join("broken.glb");
+    std::fs::write(&path, broken).unwrap();
+    let (valid, text) = run_checker("node", "scripts/validate_gltf.js", &path);
+    assert!(!valid, "the validator accepted a broken file: {text}");
+    let (read, text) = run_checker("python3", "scripts/read_gltf.py", &path);
+    assert!(!read, "the reader accepted a broken file: {text}");
+}
+
+#[test]
+fn missing_photos_are_reported_not_fatal() {
+    // A copy of the dataset with a third of the photos gone.
+    let dir = tempfile::tempdir().unwrap();
+    let copy = dir.path().join("plant");
+    copy_dir(dataset(), &copy);
+    let mut photos: Vec<PathBuf> = std::fs::read_dir(copy.join("images"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    photos.sort();
+    for photo in photos.iter().step_by(3) {
+        std::fs::remove_file(photo).unwrap();
+    }
+    let out = dir.path().join("out");
+    cargo_bin_cmd!("frond")
+        .arg("reconstruct")
+        .arg(&copy)
+        .arg("--out")
+        .arg(&out)
+        .assert()
+        .success();
+    let report = read_json(&out.join("report.json"));
+    assert!(report["counts"]["leaves_fitted"].as_u64().unwrap() >= 5);
+    let with_images = report["segmentation"]["views_with_images"]
+        .as_u64()
+        .unwrap();
+    assert_eq!(with_images, 16 - 6, "{}", report["segmentation"]);
+    // The leaf stage names the views it could not use (those among its candidates).
+    for unusable in report["unusable_views"].as_array().unwrap() {
+        assert!(
+            unusable["reason"].as_str().unwrap().contains("Missing"),
+            "{unusable}"
+        );
+    }
+    assert!(!report["unusable_views"].as_array().unwrap().is_empty());
+    // Every chosen boundary view has its photo.
+    for leaf in report["leaves"].as_array().unwrap() {
+        if let Some(view) = leaf["view"].as_u64() {
+            let name = format!("view_{:04}.png", view - 1);
+            assert!(copy.join("images").join(&name).is_file(), "{name} chosen");
+        }
+    }
+    let (valid, text) = run_checker("node", "scripts/validate_gltf.js", &out.join("plant.glb"));
+    assert!(valid, "{text}");
+}
+
+#[test]
+fn no_photos_at_all_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let copy = dir.path().join("plant");
+    copy_dir(dataset(), &copy);
+    std::fs::remove_dir_all(copy.join("images")).unwrap();
+    let output = cargo_bin_cmd!("frond")
+        .arg("reconstruct")
+        .arg(&copy)
+        .arg("--out")
+        .arg(dir.path().join("out"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success());
+    assert!(stderr.contains("image"), "{stderr}");
+    assert!(!dir.path().join("out/plant.glb").exists());
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), &target).unwrap();
+        }
+    }
+}
