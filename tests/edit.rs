@@ -310,6 +310,10 @@ fn merge_by_click_repairs_an_over_split_leaf() {
         [middle.x + across.x, middle.y + across.y],
     ];
     let image_id = session.scene().reconstruction.images()[view].id;
+    // The leaf's image boundary, cached; an edit that moves its points forgets it.
+    let segment = session.segment_of()[members[0]] as u32;
+    session.compute_boundary(segment, view).unwrap();
+    assert!(session.boundary(segment, view).is_some());
     session
         .apply(Command::SplitByStroke {
             image_id,
@@ -317,6 +321,7 @@ fn merge_by_click_repairs_an_over_split_leaf() {
             closed: false,
         })
         .unwrap();
+    assert!(session.boundary(segment, view).is_none());
     let split = scores(&session);
     assert_eq!(split.over_segmented, before.over_segmented + 1, "{split:?}");
     // One click on each half merges them back.
@@ -341,6 +346,11 @@ fn merge_by_click_repairs_an_over_split_leaf() {
     let repaired = scores(&session);
     assert_eq!(repaired.over_segmented, before.over_segmented);
     assert_eq!(repaired.matched, before.matched);
+    // Boundaries computed after the merge are forgotten again by undoing it.
+    let merged = session.segment_of()[members[0]] as u32;
+    session.compute_boundary(merged, view).unwrap();
+    assert!(session.undo());
+    assert!(session.boundary(merged, view).is_none());
 }
 
 /// A few edits that apply to any segmentation: mark, merge, split.

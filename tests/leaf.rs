@@ -229,8 +229,8 @@ fn missing_photos_are_reported_not_fatal() {
     assert!(!report["unusable_views"].as_array().unwrap().is_empty());
     // Every chosen boundary view has its photo.
     for leaf in report["leaves"].as_array().unwrap() {
-        if let Some(view) = leaf["view"].as_u64() {
-            let name = format!("view_{:04}.png", view - 1);
+        if let Some(image_id) = leaf["image_id"].as_u64() {
+            let name = format!("view_{:04}.png", image_id - 1);
             assert!(copy.join("images").join(&name).is_file(), "{name} chosen");
         }
     }
@@ -267,5 +267,60 @@ fn copy_dir(from: &Path, to: &Path) {
         } else {
             std::fs::copy(entry.path(), &target).unwrap();
         }
+    }
+}
+
+#[test]
+fn the_user_picks_the_generic_leaf() {
+    let report = read_json(&reconstruction().join("report.json"));
+    let automatic = report["template"]["segment"].as_u64().unwrap();
+    // Another fitted leaf, with its boundary view, then without a view.
+    let other = report["leaves"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|l| l["segment"].as_u64() != Some(automatic) && l["image_id"].is_u64())
+        .unwrap();
+    let segment = other["segment"].as_u64().unwrap();
+    let image_id = other["image_id"].as_u64().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    for (pick, expected_image) in [
+        (format!("{segment}:{image_id}"), Some(image_id)),
+        (format!("{segment}"), None),
+    ] {
+        let out = dir.path().join(pick.replace(':', "_"));
+        cargo_bin_cmd!("frond")
+            .arg("reconstruct")
+            .arg(dataset())
+            .args(["--template", &pick, "--out"])
+            .arg(&out)
+            .assert()
+            .success();
+        let picked = read_json(&out.join("report.json"));
+        assert_eq!(picked["template"]["segment"].as_u64(), Some(segment));
+        if let Some(image) = expected_image {
+            assert_eq!(picked["template"]["image_id"].as_u64(), Some(image));
+        }
+        assert!(picked["counts"]["leaves_fitted"].as_u64().unwrap() >= 8);
+    }
+    // Picks that name nothing are refused with the reason.
+    for (pick, message) in [
+        ("9999", "no such segment"),
+        (
+            &format!("{segment}:9999") as &str,
+            "no registered image has id 9999",
+        ),
+        ("leaf", "not a non-negative integer"),
+    ] {
+        let output = cargo_bin_cmd!("frond")
+            .arg("reconstruct")
+            .arg(dataset())
+            .args(["--template", pick, "--out"])
+            .arg(dir.path().join("bad"))
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(!output.status.success());
+        assert!(stderr.contains(message), "{pick}: {stderr}");
     }
 }

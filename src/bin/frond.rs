@@ -96,6 +96,10 @@ enum Command {
         /// ICP to the image boundary) or `flat` (PCA plane and scaling only).
         #[arg(long, value_enum, default_value = "full")]
         fit: FitMode,
+        /// The generic leaf: `SEGMENT` (its best view) or `SEGMENT:IMAGE_ID` (a COLMAP image
+        /// id); default: the most frontal, best-segmented large leaf.
+        #[arg(long, value_parser = parse_template_pick)]
+        template: Option<(u32, Option<u32>)>,
     },
     /// Re-apply a project's edits headlessly and write the resulting segmentation.
     Replay {
@@ -410,10 +414,27 @@ fn run_segmentation(
     Ok((scene, segmentation))
 }
 
+/// `SEGMENT` or `SEGMENT:IMAGE_ID`.
+fn parse_template_pick(text: &str) -> Result<(u32, Option<u32>), String> {
+    let number = |part: &str, what: &str| {
+        part.trim()
+            .parse::<u32>()
+            .map_err(|_| format!("{what} '{part}' is not a non-negative integer"))
+    };
+    match text.split_once(':') {
+        None => Ok((number(text, "segment")?, None)),
+        Some((segment, image)) => Ok((
+            number(segment, "segment")?,
+            Some(number(image, "image id")?),
+        )),
+    }
+}
+
 fn reconstruct(
     scene_args: &SceneArgs,
     params: &SegmentArgs,
     fit: FitMode,
+    template: Option<(u32, Option<u32>)>,
     out: &Path,
 ) -> Result<()> {
     let started = std::time::Instant::now();
@@ -430,6 +451,16 @@ fn reconstruct(
             options.fit.use_boundary = false;
             options.fit.deform = false;
         }
+    }
+    if let Some((segment, image_id)) = template {
+        let images = session.scene().reconstruction.images();
+        let view = match image_id {
+            None => None,
+            Some(id) => Some(images.iter().position(|i| i.id == id).with_context(|| {
+                format!("--template {segment}:{id}: no registered image has id {id}")
+            })?),
+        };
+        options.template = Some(frond::leaf::TemplatePick { segment, view });
     }
     let progress = BarProgress::new();
     let leaves = frond::leaf::reconstruct_leaves(&mut session, &options, &progress)
@@ -480,12 +511,15 @@ fn reconstruct(
             "triangles": export.triangles,
             "atlas_pages": export.atlas_pages,
         },
-        "template": leaves.template_source,
+        "template": leaves.template_source.map(|t| serde_json::json!({
+            "segment": t.segment,
+            "image_id": session.scene().reconstruction.images()[t.view].id,
+        })),
         "skipped": leaves.skipped,
         "unusable_views": leaves.unusable_views,
         "leaves": leaves.leaves.iter().map(|l| serde_json::json!({
             "segment": l.segment,
-            "view": l.view.map(|v| session.scene().reconstruction.images()[v].id),
+            "image_id": l.view.map(|v| session.scene().reconstruction.images()[v].id),
             "points": l.fit.points,
             "point_residual": l.fit.point_residual,
             "length": l.fit.length,
@@ -584,7 +618,8 @@ fn main() -> Result<()> {
             out,
             params,
             fit,
-        } => reconstruct(scene, params, *fit, out),
+            template,
+        } => reconstruct(scene, params, *fit, *template, out),
         Command::Replay { project, out } => replay(project, out.as_deref()),
         Command::Eval {
             gt,

@@ -38,7 +38,15 @@ pub struct TemplateSource {
 pub struct LeafOptions {
     pub fit: LeafFitOptions,
     /// The user's sample leaf; `None` chooses one automatically.
-    pub template: Option<TemplateSource>,
+    pub template: Option<TemplatePick>,
+}
+
+/// The user's choice of generic leaf: a segment, and optionally the view to take it from
+/// (default: the segment's chosen boundary view).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct TemplatePick {
+    pub segment: u32,
+    pub view: Option<usize>,
 }
 
 /// A leaf of the plant model.
@@ -89,10 +97,10 @@ pub enum LeafError {
     Edit(#[from] EditError),
     #[error("no leaf segment is suitable as the generic leaf (none with an image boundary)")]
     NoTemplate,
-    #[error("the chosen generic leaf (segment {segment}, view {view}): {message}")]
+    #[error("the generic leaf (segment {segment}{}): {message}", view.map(|v| format!(", view {v}")).unwrap_or_default())]
     BadTemplate {
         segment: u32,
-        view: usize,
+        view: Option<usize>,
         message: String,
     },
 }
@@ -279,7 +287,7 @@ pub fn extract_template(
 ) -> Result<LeafTemplate, LeafError> {
     let bad = |message: String| LeafError::BadTemplate {
         segment: source.segment,
-        view: source.view,
+        view: Some(source.view),
         message,
     };
     let points = segment_points(session, source.segment);
@@ -570,6 +578,32 @@ pub fn choose_template(
     best.map(|(_, source)| source).ok_or(LeafError::NoTemplate)
 }
 
+/// Checks that a user's generic-leaf pick names a non-empty segment and an existing view.
+fn check_template_pick(session: &Session, pick: TemplatePick) -> Result<(), LeafError> {
+    let bad = |message: String| LeafError::BadTemplate {
+        segment: pick.segment,
+        view: pick.view,
+        message,
+    };
+    let exists = session
+        .segments()
+        .get(pick.segment as usize)
+        .is_some_and(|s| s.is_some());
+    if !exists || session.members(pick.segment).is_empty() {
+        return Err(bad(format!(
+            "no such segment (the session has {})",
+            session.segments().len()
+        )));
+    }
+    let views = session.scene().reconstruction.images().len();
+    if let Some(view) = pick.view
+        && view >= views
+    {
+        return Err(bad(format!("no such view (the model has {views})")));
+    }
+    Ok(())
+}
+
 /// How many of the largest leaves compete to be the generic leaf.
 const TEMPLATE_CANDIDATES: usize = 6;
 
@@ -597,6 +631,10 @@ pub fn reconstruct_leaves(
         .filter(|&id| !session.members(id).is_empty())
         .collect();
 
+    if let Some(pick) = options.template {
+        check_template_pick(session, pick)?;
+    }
+
     let clock = Instant::now();
     let boundaries = if options.fit.use_boundary {
         choose_boundaries(session, &leaf_segments, &plant, progress)?
@@ -607,11 +645,16 @@ pub fn reconstruct_leaves(
             .map(|&s| (session.members(s).len(), s))
             .collect();
         largest.sort_by(|a, b| b.cmp(a));
-        let some: Vec<u32> = largest
+        let mut some: Vec<u32> = largest
             .iter()
             .take(TEMPLATE_CANDIDATES)
             .map(|&(_, s)| s)
             .collect();
+        if let Some(pick) = options.template
+            && !some.contains(&pick.segment)
+        {
+            some.push(pick.segment);
+        }
         choose_boundaries(session, &some, &plant, progress)?
     };
     timings.boundaries = clock.elapsed().as_secs_f64();
@@ -619,7 +662,26 @@ pub fn reconstruct_leaves(
     progress.stage("generic leaf", 0);
     let clock = Instant::now();
     let source = match options.template {
-        Some(source) => Some(source),
+        Some(TemplatePick {
+            segment,
+            view: Some(view),
+        }) => Some(TemplateSource { segment, view }),
+        Some(TemplatePick {
+            segment,
+            view: None,
+        }) => match boundaries.chosen.get(&segment) {
+            Some(choice) => Some(TemplateSource {
+                segment,
+                view: choice.view,
+            }),
+            None => {
+                return Err(LeafError::BadTemplate {
+                    segment,
+                    view: None,
+                    message: "no view gives it an image boundary; pick a view".into(),
+                });
+            }
+        },
         None => choose_template(session, &plant, &boundaries.chosen).ok(),
     };
     let template = match source {
@@ -635,7 +697,7 @@ pub fn reconstruct_leaves(
             LeafTemplate::from_outline(&ellipse, LeafTemplate::plain_texture(64)).map_err(|e| {
                 LeafError::BadTemplate {
                     segment: 0,
-                    view: 0,
+                    view: None,
                     message: e.to_string(),
                 }
             })?
