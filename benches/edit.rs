@@ -129,9 +129,6 @@ fn edits(c: &mut Criterion) {
     let centre = uv.iter().fold(nalgebra::Point2::origin(), |a, p| {
         a + p.coords / uv.len() as f64
     });
-    let (lo_x, hi_x) = uv
-        .iter()
-        .fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.x), b.max(p.x)));
     let (lo_y, hi_y) = uv
         .iter()
         .fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.y), b.max(p.y)));
@@ -146,20 +143,6 @@ fn edits(c: &mut Criterion) {
         stroke: vec![[centre.x, lo_y - 10.0], [centre.x, hi_y + 10.0]],
         closed: false,
     };
-    // Clicks on the segment's leftmost and rightmost projected points (one on each side of
-    // the split stroke).
-    let extreme = |sign: f64| {
-        let p = uv
-            .iter()
-            .max_by(|a, b| (sign * a.x).total_cmp(&(sign * b.x)))
-            .expect("projected points");
-        PixelRef {
-            image_id: image.id,
-            pixel: [p.x, p.y],
-        }
-    };
-    let (left, right) = (extreme(-1.0), extreme(1.0));
-    let _ = (lo_x, hi_x);
     let mut group = c.benchmark_group("edits_5k_point_segment");
     group.sample_size(20);
     group.bench_function("split_by_stroke", |b| {
@@ -170,23 +153,43 @@ fn edits(c: &mut Criterion) {
     });
     session.apply(split.clone()).expect("split");
     // Click one point of each of the two parts the split made.
+    // Click the middle of each of the two parts the split made (the visible point nearest to
+    // the part's projected centroid, away from the stroke and the rim).
     let part_click = |session: &Session, target: i32, other: bool| {
-        members
+        let part: Vec<(u32, nalgebra::Point2<f64>)> = members
             .iter()
             .filter(|&&p| {
                 points.views[p as usize]
                     .binary_search(&(view as u32))
                     .is_ok()
+                    && (session.segment_of()[p as usize] == target) != other
             })
-            .find(|&&p| (session.segment_of()[p as usize] == target) != other)
-            .and_then(|&p| model.project(image, &points.positions[p as usize]))
-            .map(|uv| PixelRef {
-                image_id: image.id,
-                pixel: [uv.x, uv.y],
+            .filter_map(|&p| {
+                model
+                    .project(image, &points.positions[p as usize])
+                    .map(|uv| (p, uv))
             })
-            .expect("a visible point of each part")
+            .collect();
+        let centroid = part.iter().fold(nalgebra::Point2::origin(), |a, (_, uv)| {
+            a + uv.coords / part.len() as f64
+        });
+        let (p, uv) = *part
+            .iter()
+            .min_by(|a, b| (a.1 - centroid).norm().total_cmp(&(b.1 - centroid).norm()))
+            .expect("a visible point of each part");
+        let click = PixelRef {
+            image_id: image.id,
+            pixel: [uv.x, uv.y],
+        };
+        assert_eq!(
+            session
+                .pick_segment(&click)
+                .expect("a point under the click") as i32,
+            session.segment_of()[p as usize],
+            "the click lands on its part"
+        );
+        click
     };
-    let _ = (left, right);
     let merge = Command::MergeByClick {
         first: part_click(&session, segment as i32, false),
         second: part_click(&session, segment as i32, true),
