@@ -1,5 +1,5 @@
-//! Leaf reconstruction end to end through the CLI on a small synthetic plant: `frond
-//! reconstruct` then `frond eval`; the exported glb passes the Khronos glTF validator and
+//! Leaf reconstruction (and the automatic skeleton) end to end through the CLI on a small
+//! synthetic plant: `frond reconstruct` then `frond eval`; the exported glb passes the Khronos glTF validator and
 //! opens in a Python glTF reader; missing photos and broken files make notes or clear errors,
 //! never a crash.
 
@@ -91,6 +91,7 @@ fn reconstruct_writes_every_output_and_a_report() {
         "plant_atlas_0.png",
         "segmentation.ply",
         "segments.json",
+        "skeleton.json",
         "report.json",
     ] {
         assert!(out.join(file).is_file(), "{file} missing");
@@ -131,6 +132,20 @@ fn reconstructed_leaves_meet_the_accuracy_targets() {
         .unwrap();
     assert!(output.status.success());
     let eval: Value = serde_json::from_slice(&output.stdout).unwrap();
+    // The automatic skeleton follows the stem and finds the petioles.
+    let skeleton = &eval["skeleton"];
+    eprintln!("skeleton: {skeleton}");
+    assert!(
+        skeleton["stem_distance_in_radii"].as_f64().unwrap() <= 1.0,
+        "{skeleton}"
+    );
+    // Regression floor, not the issue's target: on this sparse 16-view dataset the skeleton
+    // finds 6 of 10 petioles (0.6); the ≥ 0.8 target is measured on full-size broadleaf
+    // datasets (issue 7, still open: 0.56–1.0 over six seeds).
+    assert!(
+        skeleton["branch_recall"].as_f64().unwrap() >= 0.5,
+        "{skeleton}"
+    );
     let recall = eval["leaves"]["recall"].as_f64().unwrap();
     let chamfer = eval["chamfer_relative"]["median"].as_f64().unwrap();
     let area = eval["area_relative_error"]["median"].as_f64().unwrap();
@@ -156,7 +171,13 @@ fn exported_glb_passes_the_khronos_validator_and_a_python_reader() {
         .iter()
         .map(|n| n.as_str().unwrap())
         .collect();
-    assert!(!nodes.is_empty() && nodes.iter().all(|n| n.starts_with("leaf_")));
+    assert!(nodes.iter().any(|n| n.starts_with("leaf_")));
+    assert!(nodes.iter().any(|n| n.starts_with("branch_")));
+    assert!(
+        nodes
+            .iter()
+            .all(|n| n.starts_with("leaf_") || n.starts_with("branch_"))
+    );
     assert!(summary["images"].as_u64().unwrap() >= 1);
     assert!(summary["triangles"].as_u64().unwrap() > 100);
 }

@@ -466,6 +466,23 @@ fn reconstruct(
     let leaves = frond::leaf::reconstruct_leaves(&mut session, &options, &progress)
         .context("reconstructing leaves")?;
     progress.bar.finish_and_clear();
+    let clock = std::time::Instant::now();
+    let (branches, skeleton_stats) =
+        match frond::branch::plant::session_skeleton(&session, &Default::default()) {
+            Ok((tree, stats)) => (tree, Some(stats)),
+            Err(e) => {
+                tracing::warn!("no automatic skeleton: {e}");
+                (frond::branch::BranchTree::default(), None)
+            }
+        };
+    let skeleton_seconds = clock.elapsed().as_secs_f64();
+    let skeleton_path = out.join("skeleton.json");
+    frond::util::atomic::write_atomic(
+        &skeleton_path,
+        serde_json::to_string_pretty(&frond::branch::plant::skeleton_records(&branches))?
+            .as_bytes(),
+    )
+    .with_context(|| format!("writing {}", skeleton_path.display()))?;
     let model = frond::model::PlantModel {
         leaves: leaves
             .leaves
@@ -476,7 +493,7 @@ fn reconstruct(
                 texture: l.fit.texture.clone(),
             })
             .collect(),
-        branches: Vec::new(),
+        branches: frond::branch::plant::model_branches(&branches),
     };
     let clock = std::time::Instant::now();
     let export = model
@@ -501,16 +518,18 @@ fn reconstruct(
     let report = serde_json::json!({
         "frond": env!("CARGO_PKG_VERSION"),
         "input": input,
-        "stages": ["foreground", "segmentation", "boundaries", "leaves", "export"],
+        "stages": ["foreground", "segmentation", "boundaries", "leaves", "skeleton", "export"],
         "counts": {
             "points": session.segmentation().points.len(),
             "foreground": class_counts,
             "segments": session.segments().iter().flatten().count(),
             "leaves_fitted": leaves.leaves.len(),
             "leaves_skipped": leaves.skipped.len(),
+            "branches": branches.branches.len(),
             "triangles": export.triangles,
             "atlas_pages": export.atlas_pages,
         },
+        "skeleton": skeleton_stats,
         "template": leaves.template_source.map(|t| serde_json::json!({
             "segment": t.segment,
             "image_id": session.scene().reconstruction.images()[t.view].id,
@@ -534,6 +553,7 @@ fn reconstruct(
         "segmentation": segmentation_summary,
         "timings": {
             "leaves": leaves.timings,
+            "skeleton": skeleton_seconds,
             "export": export_seconds,
             "total": started.elapsed().as_secs_f64(),
         },

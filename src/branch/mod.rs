@@ -5,6 +5,8 @@
 //! Meshing uses rotation-minimising frames (double reflection, Wang et al. 2008), so tubes do
 //! not twist or flip along curved skeletons.
 
+pub mod plant;
+pub mod skeleton;
 pub mod spline;
 
 use nalgebra::{Point3, Vector3};

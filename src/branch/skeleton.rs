@@ -1,0 +1,745 @@
+//! An automatic first skeleton from the plant's non-leaf points, so that users edit branches
+//! rather than draw them from nothing (seed 004 §7 has the user draw every branch).
+//!
+//! Geodesic level sets (Verroust & Lazarus 2000; Xu et al. 2007): a kNN graph over the points
+//! (components joined across small gaps), Dijkstra distances from the root (the lowest point
+//! near the plant's axis), points binned by distance into levels of a few point spacings, the
+//! connected pieces of each level become nodes at their centroids, and each node's parent is
+//! the piece its points' shortest paths come from. The node tree is split into branches by the
+//! longest-path rule (the deepest child continues the branch; the others start child
+//! branches), short spurs are pruned, and each branch gets a spline through its smoothed
+//! nodes and a linear radius fitted to the points' distances from its axis.
+
+use std::cmp::Reverse;
+use std::collections::{BinaryHeap, HashMap};
+use std::num::NonZero;
+
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use nalgebra::{Point3, Vector3};
+use serde::Serialize;
+
+use super::{Branch, BranchTree, GeneralizedCylinder, Spline};
+
+/// Settings of the automatic skeleton.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct SkeletonOptions {
+    /// Neighbours per point in the kNN graph.
+    pub neighbours: usize,
+    /// Width of a geodesic level, in median neighbour spacings.
+    pub level_width: f64,
+    /// Components are joined across gaps up to this many median spacings.
+    pub max_gap: f64,
+    /// Components with fewer points are ignored.
+    pub min_component_points: usize,
+    /// Branches shorter than this many level widths are pruned (with their sub-branches).
+    pub min_branch_levels: f64,
+}
+
+impl Default for SkeletonOptions {
+    fn default() -> Self {
+        Self {
+            neighbours: 10,
+            level_width: 4.0,
+            max_gap: 12.0,
+            min_component_points: 12,
+            min_branch_levels: 3.0,
+        }
+    }
+}
+
+/// What the skeleton was built from, for reports.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct SkeletonStats {
+    pub points: usize,
+    pub spacing: f64,
+    pub level_width: f64,
+    pub components: usize,
+    pub components_joined: usize,
+    pub points_reached: usize,
+    pub nodes: usize,
+    pub branches: usize,
+    pub branches_pruned: usize,
+}
+
+/// Why no skeleton could be built.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SkeletonError {
+    #[error("{0} non-leaf points: too few for a skeleton")]
+    TooFewPoints(usize),
+    #[error("the non-leaf points contain a non-finite coordinate (point {0})")]
+    NonFinite(usize),
+}
+
+/// Non-negative distances ordered by their bits (valid for finite values ≥ 0).
+fn key(distance: f64) -> u64 {
+    distance.max(0.0).to_bits()
+}
+
+struct UnionFind {
+    parent: Vec<usize>,
+}
+
+impl UnionFind {
+    fn new(n: usize) -> Self {
+        Self {
+            parent: (0..n).collect(),
+        }
+    }
+    fn find(&mut self, mut i: usize) -> usize {
+        while self.parent[i] != i {
+            self.parent[i] = self.parent[self.parent[i]];
+            i = self.parent[i];
+        }
+        i
+    }
+    fn union(&mut self, a: usize, b: usize) {
+        let (a, b) = (self.find(a), self.find(b));
+        if a != b {
+            self.parent[a.max(b)] = a.min(b);
+        }
+    }
+}
+
+/// A node of the level-set tree: a connected piece of one geodesic level.
+struct Node {
+    centroid: Point3<f64>,
+    points: Vec<usize>,
+    parent: Option<usize>,
+    children: Vec<usize>,
+    /// Geodesic distance of the node (mean of its points').
+    distance: f64,
+}
+
+/// Builds a branch tree from non-leaf plant points (stems, petioles, twigs).
+/// `up` is the plant's up direction and `axis_point` a point on its vertical axis.
+pub fn automatic_skeleton(
+    points: &[Point3<f64>],
+    up: &Vector3<f64>,
+    axis_point: &Point3<f64>,
+    options: &SkeletonOptions,
+) -> Result<(BranchTree, SkeletonStats), SkeletonError> {
+    let n = points.len();
+    let k = options.neighbours.max(2);
+    if n < options.min_component_points.max(k + 1) {
+        return Err(SkeletonError::TooFewPoints(n));
+    }
+    if let Some(i) = points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+        return Err(SkeletonError::NonFinite(i));
+    }
+    let mut stats = SkeletonStats {
+        points: n,
+        ..SkeletonStats::default()
+    };
+    let coords: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
+    let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&coords)
+        .map_err(|_| SkeletonError::TooFewPoints(n))?;
+    let wanted = NonZero::new((k + 1).min(n)).unwrap_or(NonZero::<usize>::MIN);
+    let mut edges: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
+    let mut nearest = Vec::with_capacity(n);
+    for (i, c) in coords.iter().enumerate() {
+        let found = tree
+            .query(c)
+            .nearest_n::<SquaredEuclidean<f64>>(wanted)
+            .execute();
+        let mut first = f64::INFINITY;
+        for f in found {
+            let j = f.item as usize;
+            if j == i {
+                continue;
+            }
+            let d = f.distance.sqrt();
+            first = first.min(d);
+            edges[i].push((j, d));
+            edges[j].push((i, d));
+        }
+        if first.is_finite() {
+            nearest.push(first);
+        }
+    }
+    if nearest.is_empty() {
+        return Err(SkeletonError::TooFewPoints(n));
+    }
+    nearest.sort_by(f64::total_cmp);
+    let spacing = nearest[nearest.len() / 2].max(1e-9);
+    stats.spacing = spacing;
+    let level_width = options.level_width * spacing;
+    stats.level_width = level_width;
+    // Long kNN edges of isolated points would let paths jump: keep edges within a level
+    // width (components split by this are joined below across small gaps, nearest first).
+    for list in &mut edges {
+        list.retain(|&(_, d)| d <= level_width);
+    }
+
+    // Components of the kNN graph.
+    let mut components = UnionFind::new(n);
+    for (i, list) in edges.iter().enumerate() {
+        for &(j, _) in list {
+            components.union(i, j);
+        }
+    }
+    let mut members: HashMap<usize, Vec<usize>> = HashMap::new();
+    for i in 0..n {
+        members.entry(components.find(i)).or_default().push(i);
+    }
+    let mut groups: Vec<Vec<usize>> = members
+        .into_values()
+        .filter(|m| m.len() >= options.min_component_points)
+        .collect();
+    groups.sort_by(|a, b| b.len().cmp(&a.len()).then(a[0].cmp(&b[0])));
+    stats.components = groups.len();
+    if groups.is_empty() {
+        return Err(SkeletonError::TooFewPoints(0));
+    }
+
+    // Root: the lowest point among those horizontally nearest the axis.
+    let horizontal = |p: &Point3<f64>| {
+        let d = p - axis_point;
+        (d - up * up.dot(&d)).norm()
+    };
+    let height = |p: &Point3<f64>| up.dot(&(p - axis_point));
+    let candidates: Vec<usize> = groups.iter().flatten().copied().collect();
+    let mut by_axis: Vec<f64> = candidates.iter().map(|&i| horizontal(&points[i])).collect();
+    by_axis.sort_by(f64::total_cmp);
+    let near_axis = by_axis[(by_axis.len() - 1) / 4];
+    let root = candidates
+        .iter()
+        .copied()
+        .filter(|&i| horizontal(&points[i]) <= near_axis)
+        .min_by(|&a, &b| {
+            height(&points[a])
+                .total_cmp(&height(&points[b]))
+                .then(a.cmp(&b))
+        })
+        .unwrap_or(candidates[0]);
+
+    // Join the other components to the connected part across small gaps, nearest first.
+    let mut connected = vec![false; n];
+    let root_group = groups.iter().position(|g| g.contains(&root)).unwrap_or(0);
+    for &i in &groups[root_group] {
+        connected[i] = true;
+    }
+    let mut pending: Vec<usize> = (0..groups.len()).filter(|&g| g != root_group).collect();
+    let max_gap = options.max_gap * spacing;
+    loop {
+        let inside: Vec<usize> = (0..n).filter(|&i| connected[i]).collect();
+        let inside_coords: Vec<[f64; 3]> = inside.iter().map(|&i| coords[i]).collect();
+        let Ok(inside_tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&inside_coords) else {
+            break;
+        };
+        let mut best: Option<(f64, usize, usize, usize)> = None;
+        for (slot, &g) in pending.iter().enumerate() {
+            for &i in &groups[g] {
+                let found = inside_tree
+                    .query(&coords[i])
+                    .nearest_n::<SquaredEuclidean<f64>>(NonZero::<usize>::MIN)
+                    .execute();
+                let Some(found) = found.first() else {
+                    continue;
+                };
+                let d = found.distance.sqrt();
+                if d <= max_gap && best.is_none_or(|b| d < b.0) {
+                    best = Some((d, slot, i, inside[found.item as usize]));
+                }
+            }
+        }
+        let Some((d, slot, from, to)) = best else {
+            break;
+        };
+        edges[from].push((to, d));
+        edges[to].push((from, d));
+        for &i in &groups[pending[slot]] {
+            connected[i] = true;
+        }
+        pending.swap_remove(slot);
+        stats.components_joined += 1;
+    }
+
+    // Geodesic distances from the root.
+    let mut distance = vec![f64::INFINITY; n];
+    let mut predecessor = vec![usize::MAX; n];
+    distance[root] = 0.0;
+    let mut heap = BinaryHeap::new();
+    heap.push(Reverse((key(0.0), root)));
+    while let Some(Reverse((d_key, i))) = heap.pop() {
+        let d = f64::from_bits(d_key);
+        if d > distance[i] {
+            continue;
+        }
+        for &(j, w) in &edges[i] {
+            let candidate = d + w;
+            if candidate < distance[j] {
+                distance[j] = candidate;
+                predecessor[j] = i;
+                heap.push(Reverse((key(candidate), j)));
+            }
+        }
+    }
+    let reached: Vec<usize> = (0..n).filter(|&i| distance[i].is_finite()).collect();
+    stats.points_reached = reached.len();
+
+    // Level sets and their connected pieces.
+    let level = |i: usize| (distance[i] / level_width).floor() as i64;
+    let mut pieces = UnionFind::new(n);
+    for &i in &reached {
+        for &(j, _) in &edges[i] {
+            if distance[j].is_finite() && level(i) == level(j) {
+                pieces.union(i, j);
+            }
+        }
+    }
+    let mut node_of = vec![usize::MAX; n];
+    let mut nodes: Vec<Node> = Vec::new();
+    let mut index: HashMap<usize, usize> = HashMap::new();
+    let mut order = reached.clone();
+    order.sort_by(|&a, &b| distance[a].total_cmp(&distance[b]).then(a.cmp(&b)));
+    for &i in &order {
+        let piece = pieces.find(i);
+        let node = *index.entry(piece).or_insert_with(|| {
+            nodes.push(Node {
+                centroid: Point3::origin(),
+                points: Vec::new(),
+                parent: None,
+                children: Vec::new(),
+                distance: 0.0,
+            });
+            nodes.len() - 1
+        });
+        node_of[i] = node;
+        nodes[node].points.push(i);
+    }
+    for node in &mut nodes {
+        let count = node.points.len() as f64;
+        node.centroid = Point3::from(
+            node.points
+                .iter()
+                .fold(Vector3::zeros(), |a, &i| a + points[i].coords)
+                / count,
+        );
+        node.distance = node.points.iter().map(|&i| distance[i]).sum::<f64>() / count;
+    }
+    // Parent: the node most of the piece's shortest paths come from.
+    for v in 0..nodes.len() {
+        let mut votes: HashMap<usize, usize> = HashMap::new();
+        for &i in &nodes[v].points {
+            let p = predecessor[i];
+            if p != usize::MAX && node_of[p] != v {
+                *votes.entry(node_of[p]).or_insert(0) += 1;
+            }
+        }
+        let parent = votes
+            .into_iter()
+            .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+            .map(|(p, _)| p);
+        nodes[v].parent = parent;
+        if let Some(p) = parent {
+            nodes[p].children.push(v);
+        }
+    }
+    merge_close_siblings(&mut nodes, points, level_width);
+    let nodes = compact(nodes);
+    stats.nodes = nodes.len();
+
+    // Longest-path decomposition: the deepest child continues a branch.
+    let mut depth = vec![0.0f64; nodes.len()];
+    let mut by_distance: Vec<usize> = (0..nodes.len()).collect();
+    by_distance.sort_by(|&a, &b| nodes[b].distance.total_cmp(&nodes[a].distance));
+    for &v in &by_distance {
+        depth[v] = nodes[v]
+            .children
+            .iter()
+            .map(|&c| depth[c] + (nodes[c].centroid - nodes[v].centroid).norm())
+            .fold(0.0, f64::max);
+    }
+    let Some(root_node) = nodes.iter().position(|v| v.points.contains(&root)) else {
+        return Err(SkeletonError::TooFewPoints(n));
+    };
+    let mut branches: Vec<Branch> = Vec::new();
+    // (first node, parent branch id, attachment node)
+    let mut queue: Vec<(usize, Option<u32>, Option<usize>)> = vec![(root_node, None, None)];
+    let min_length = options.min_branch_levels * level_width;
+    while let Some((start, parent, attachment)) = queue.pop() {
+        let mut chain = vec![start];
+        let mut current = start;
+        let deepest = |v: usize| {
+            nodes[v].children.iter().copied().max_by(|&a, &b| {
+                let reach = |c: usize| depth[c] + (nodes[c].centroid - nodes[v].centroid).norm();
+                reach(a).total_cmp(&reach(b)).then(b.cmp(&a))
+            })
+        };
+        while let Some(next) = deepest(current) {
+            chain.push(next);
+            current = next;
+        }
+        let mut polyline: Vec<Point3<f64>> = Vec::with_capacity(chain.len() + 1);
+        if let Some(a) = attachment {
+            polyline.push(nodes[a].centroid);
+        }
+        polyline.extend(smooth(
+            &chain.iter().map(|&v| nodes[v].centroid).collect::<Vec<_>>(),
+        ));
+        let length: f64 = polyline.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+        // Spurs: too short, or ending within a few radii of the parent's axis (parts of a
+        // thick stem's ring that lag behind in geodesic distance hug its surface).
+        let hugs_parent = match (parent, attachment, polyline.last()) {
+            (Some(p), Some(a), Some(tip)) => {
+                let parent_branch = &branches[p as usize];
+                let cylinder = &parent_branch.cylinder;
+                let radius = cylinder
+                    .radius_at(attachment_fraction(parent_branch, &nodes[a].centroid))
+                    .max(0.5 * (cylinder.radius_start + cylinder.radius_end));
+                parent_branch.cylinder.skeleton.distance_to(tip) < 2.5 * radius
+            }
+            _ => false,
+        };
+        if parent.is_some() && (chain.len() < 2 || length < min_length || hugs_parent) {
+            stats.branches_pruned += 1;
+            continue;
+        }
+        let Some(branch) = branch_from_chain(
+            branches.len() as u32,
+            parent,
+            attachment.and_then(|a| {
+                let parent_branch = &branches[parent? as usize];
+                Some(attachment_fraction(parent_branch, &nodes[a].centroid))
+            }),
+            &polyline,
+            &chain,
+            &nodes,
+            points,
+        ) else {
+            stats.branches_pruned += 1;
+            continue;
+        };
+        let id = branch.id;
+        branches.push(branch);
+        // Side branches start at each chain node's other children, base first.
+        for (position, &v) in chain.iter().enumerate().rev() {
+            let continuing = chain.get(position + 1).copied();
+            let mut others: Vec<usize> = nodes[v]
+                .children
+                .iter()
+                .copied()
+                .filter(|&c| Some(c) != continuing)
+                .collect();
+            others.sort_by(|&a, &b| depth[a].total_cmp(&depth[b]).then(a.cmp(&b)));
+            for c in others {
+                queue.push((c, Some(id), Some(v)));
+            }
+        }
+    }
+    stats.branches = branches.len();
+    Ok((BranchTree { branches }, stats))
+}
+
+/// Joins sibling pieces of a level that nearly touch (closest points less than a level width
+/// apart): sparse sampling splits a tube's ring into arcs, which are one cross-section.
+/// Nodes are visited by increasing distance, so merged children pass their children on.
+fn merge_close_siblings(nodes: &mut [Node], points: &[Point3<f64>], level_width: f64) {
+    let mut order: Vec<usize> = (0..nodes.len()).collect();
+    order.sort_by(|&a, &b| {
+        nodes[a]
+            .distance
+            .total_cmp(&nodes[b].distance)
+            .then(a.cmp(&b))
+    });
+    let gap = |a: &Node, b: &Node| {
+        let mut best = f64::INFINITY;
+        for &i in &a.points {
+            for &j in &b.points {
+                best = best.min((points[i] - points[j]).norm_squared());
+            }
+        }
+        best.sqrt()
+    };
+    for v in order {
+        if nodes[v].points.is_empty() {
+            continue;
+        }
+        let mut children = std::mem::take(&mut nodes[v].children);
+        children.sort_unstable();
+        children.dedup();
+        children.retain(|&c| !nodes[c].points.is_empty());
+        let mut k = 0;
+        while k < children.len() {
+            let a = children[k];
+            let mut m = k + 1;
+            while m < children.len() {
+                let b = children[m];
+                if gap(&nodes[a], &nodes[b]) < level_width {
+                    let moved = std::mem::take(&mut nodes[b].points);
+                    let grandchildren = std::mem::take(&mut nodes[b].children);
+                    for &g in &grandchildren {
+                        nodes[g].parent = Some(a);
+                    }
+                    let (na, nb) = (nodes[a].points.len() as f64, moved.len() as f64);
+                    let centroid_b = moved
+                        .iter()
+                        .fold(Vector3::zeros(), |s, &i| s + points[i].coords)
+                        / nb;
+                    let distance_b = nodes[b].distance;
+                    let node = &mut nodes[a];
+                    node.centroid =
+                        Point3::from((node.centroid.coords * na + centroid_b * nb) / (na + nb));
+                    node.distance = (node.distance * na + distance_b * nb) / (na + nb);
+                    node.points.extend(moved);
+                    node.children.extend(grandchildren);
+                    children.swap_remove(m);
+                    // The grown piece may now reach siblings it did not before.
+                    m = k + 1;
+                } else {
+                    m += 1;
+                }
+            }
+            k += 1;
+        }
+        nodes[v].children = children;
+    }
+}
+
+/// Drops emptied nodes and renumbers parents and children.
+fn compact(nodes: Vec<Node>) -> Vec<Node> {
+    let mut new_index = vec![usize::MAX; nodes.len()];
+    let mut next = 0;
+    for (i, node) in nodes.iter().enumerate() {
+        if !node.points.is_empty() {
+            new_index[i] = next;
+            next += 1;
+        }
+    }
+    nodes
+        .into_iter()
+        .filter(|node| !node.points.is_empty())
+        .map(|mut node| {
+            node.parent = node
+                .parent
+                .map(|p| new_index[p])
+                .filter(|&p| p != usize::MAX);
+            node.children = node
+                .children
+                .iter()
+                .map(|&c| new_index[c])
+                .filter(|&c| c != usize::MAX)
+                .collect();
+            node
+        })
+        .collect()
+}
+
+/// Moving average over three nodes (ends kept).
+fn smooth(polyline: &[Point3<f64>]) -> Vec<Point3<f64>> {
+    if polyline.len() < 3 {
+        return polyline.to_vec();
+    }
+    let mut out = polyline.to_vec();
+    for i in 1..polyline.len() - 1 {
+        out[i] = Point3::from(
+            (polyline[i - 1].coords + polyline[i].coords + polyline[i + 1].coords) / 3.0,
+        );
+    }
+    out
+}
+
+/// Arc-length fraction of the point of a branch's skeleton nearest to `p`.
+fn attachment_fraction(branch: &Branch, p: &Point3<f64>) -> f64 {
+    let samples = branch.cylinder.skeleton.sample_by_arc_length(64);
+    let nearest = samples
+        .iter()
+        .enumerate()
+        .min_by(|a, b| (a.1.0 - p).norm().total_cmp(&(b.1.0 - p).norm()))
+        .map(|(i, _)| i)
+        .unwrap_or(0);
+    nearest as f64 / (samples.len().max(2) - 1) as f64
+}
+
+/// A branch through `polyline` (attachment point first for side branches), its radius fitted
+/// to the distances of the chain nodes' points from the local axis (linear in arc length).
+fn branch_from_chain(
+    id: u32,
+    parent: Option<u32>,
+    parent_fraction: Option<f64>,
+    polyline: &[Point3<f64>],
+    chain: &[usize],
+    nodes: &[Node],
+    points: &[Point3<f64>],
+) -> Option<Branch> {
+    // Drop consecutive near-duplicates (a spline needs distinct consecutive points).
+    let mut control: Vec<Point3<f64>> = Vec::with_capacity(polyline.len());
+    for p in polyline {
+        if control
+            .last()
+            .is_none_or(|q: &Point3<f64>| (p - q).norm() > 1e-6)
+        {
+            control.push(*p);
+        }
+    }
+    if control.len() < 2 {
+        return None;
+    }
+    let skeleton = Spline::new(control).ok()?;
+    let length = skeleton.length().max(1e-12);
+    // (arc fraction, radius) per chain node: median distance from the local axis.
+    let offset = polyline.len() - chain.len();
+    let mut arc = vec![0.0; polyline.len()];
+    for i in 1..polyline.len() {
+        arc[i] = arc[i - 1] + (polyline[i] - polyline[i - 1]).norm();
+    }
+    let total = arc.last().copied().unwrap_or(0.0).max(1e-12);
+    let samples: Vec<(f64, f64)> = chain
+        .iter()
+        .enumerate()
+        .filter_map(|(k, &v)| {
+            let i = k + offset;
+            let before = polyline[i.saturating_sub(1)];
+            let after = polyline[(i + 1).min(polyline.len() - 1)];
+            let tangent = (after - before).try_normalize(1e-12)?;
+            let centre = polyline[i];
+            let mut distances: Vec<f64> = nodes[v]
+                .points
+                .iter()
+                .map(|&p| {
+                    let d = points[p] - centre;
+                    (d - tangent * tangent.dot(&d)).norm()
+                })
+                .collect();
+            if distances.len() < 3 {
+                return None;
+            }
+            distances.sort_by(f64::total_cmp);
+            Some((arc[i] / total, distances[distances.len() / 2]))
+        })
+        .collect();
+    let (radius_start, radius_end) = fit_linear(&samples);
+    let _ = length;
+    Some(Branch {
+        id,
+        parent,
+        parent_fraction: parent_fraction.unwrap_or(0.0),
+        cylinder: GeneralizedCylinder::new(skeleton, radius_start, radius_end),
+    })
+}
+
+/// Least-squares line r(s) = a + b s through (s, r) samples, as (r(0), r(1)), kept positive;
+/// the mean when the samples cannot define a slope.
+fn fit_linear(samples: &[(f64, f64)]) -> (f64, f64) {
+    if samples.is_empty() {
+        return (0.001, 0.001);
+    }
+    let n = samples.len() as f64;
+    let mean_s = samples.iter().map(|s| s.0).sum::<f64>() / n;
+    let mean_r = samples.iter().map(|s| s.1).sum::<f64>() / n;
+    let var_s = samples.iter().map(|s| (s.0 - mean_s).powi(2)).sum::<f64>();
+    if samples.len() < 3 || var_s < 1e-9 {
+        return (mean_r, mean_r);
+    }
+    let slope = samples
+        .iter()
+        .map(|s| (s.0 - mean_s) * (s.1 - mean_r))
+        .sum::<f64>()
+        / var_s;
+    let floor = 0.2 * mean_r;
+    let start = (mean_r - slope * mean_s).max(floor);
+    let end = (mean_r + slope * (1.0 - mean_s)).max(floor);
+    (start, end)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::util::rng::Rng;
+
+    /// Points on the surface of a tube around a polyline.
+    fn tube(axis: &[Point3<f64>], radius: f64, per_metre: f64, rng: &mut Rng) -> Vec<Point3<f64>> {
+        let mut out = Vec::new();
+        for w in axis.windows(2) {
+            let d = w[1] - w[0];
+            let t = d.normalize();
+            let a = crate::branch::any_perpendicular(&t);
+            let b = t.cross(&a);
+            let count = (d.norm() * per_metre).round() as usize;
+            for _ in 0..count {
+                let s = rng.uniform();
+                let angle = rng.range(0.0, std::f64::consts::TAU);
+                out.push(w[0] + d * s + (a * angle.cos() + b * angle.sin()) * radius);
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn a_stem_with_two_side_branches() {
+        let mut rng = Rng::seed_from(3);
+        let stem = [Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, 0.4)];
+        let left = [Point3::new(0.0, 0.0, 0.15), Point3::new(-0.15, 0.0, 0.3)];
+        let right = [Point3::new(0.0, 0.0, 0.25), Point3::new(0.0, 0.15, 0.35)];
+        let mut points = tube(&stem, 0.01, 10_000.0, &mut rng);
+        points.extend(tube(&left, 0.004, 4_000.0, &mut rng));
+        points.extend(tube(&right, 0.004, 4_000.0, &mut rng));
+        let (tree, stats) = automatic_skeleton(
+            &points,
+            &Vector3::z(),
+            &Point3::origin(),
+            &SkeletonOptions::default(),
+        )
+        .unwrap();
+        assert_eq!(tree.branches.len(), 3, "{stats:?}");
+        let main = &tree.branches[0];
+        assert!(main.parent.is_none());
+        // The stem runs along z from near the bottom to near the top.
+        let start = main.cylinder.skeleton.point_at_fraction(0.0);
+        let end = main.cylinder.skeleton.point_at_fraction(1.0);
+        assert!(start.z < 0.02 && end.z > 0.37, "{start} {end}");
+        for s in 0..=20 {
+            let p = main.cylinder.skeleton.point_at_fraction(s as f64 / 20.0);
+            assert!(p.x.hypot(p.y) < 0.01, "stem point {p} off axis");
+        }
+        assert!((main.cylinder.radius_at(0.5) - 0.01).abs() < 0.004);
+        // Side branches attach to the stem at about their true heights and follow their axes.
+        for (truth, attach_height) in [(&left, 0.15), (&right, 0.25)] {
+            let branch = tree
+                .branches
+                .iter()
+                .skip(1)
+                .min_by(|a, b| {
+                    let far =
+                        |x: &Branch| (x.cylinder.skeleton.point_at_fraction(1.0) - truth[1]).norm();
+                    far(a).total_cmp(&far(b))
+                })
+                .unwrap();
+            assert_eq!(branch.parent, Some(0));
+            let fraction_height = 0.4 * branch.parent_fraction;
+            assert!(
+                (fraction_height - attach_height).abs() < 0.04,
+                "{fraction_height}"
+            );
+            let tip = branch.cylinder.skeleton.point_at_fraction(1.0);
+            assert!((tip - truth[1]).norm() < 0.03, "tip {tip}");
+            assert!((branch.cylinder.radius_at(0.6) - 0.004).abs() < 0.003);
+        }
+    }
+
+    #[test]
+    fn degenerate_input_is_an_error() {
+        let few = vec![Point3::new(0.0, 0.0, 0.0); 5];
+        assert!(matches!(
+            automatic_skeleton(
+                &few,
+                &Vector3::z(),
+                &Point3::origin(),
+                &SkeletonOptions::default()
+            ),
+            Err(SkeletonError::TooFewPoints(5))
+        ));
+        let mut nan: Vec<Point3<f64>> = (0..50).map(|i| Point3::new(i as f64, 0.0, 0.0)).collect();
+        nan[7].y = f64::NAN;
+        assert_eq!(
+            automatic_skeleton(
+                &nan,
+                &Vector3::z(),
+                &Point3::origin(),
+                &SkeletonOptions::default()
+            )
+            .unwrap_err(),
+            SkeletonError::NonFinite(7)
+        );
+    }
+}
