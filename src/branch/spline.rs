@@ -8,12 +8,27 @@ use serde::{Deserialize, Serialize};
 const TABLE_SAMPLES_PER_SEGMENT: usize = 32;
 
 /// A C¹ curve through its control points (at least two, consecutive points distinct).
+/// Deserializing validates the control points and rebuilds the arc-length table.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "SplineData")]
 pub struct Spline {
     control_points: Vec<Point3<f64>>,
     /// Cumulative arc length at uniformly spaced curve parameters, for arc-length lookups.
     #[serde(skip)]
     arc_table: Vec<(f64, f64)>,
+}
+
+/// What a spline is stored as.
+#[derive(Deserialize)]
+struct SplineData {
+    control_points: Vec<Point3<f64>>,
+}
+
+impl TryFrom<SplineData> for Spline {
+    type Error = SplineError;
+    fn try_from(data: SplineData) -> Result<Self, SplineError> {
+        Spline::new(data.control_points)
+    }
 }
 
 /// Why a spline could not be built.
@@ -191,6 +206,24 @@ fn centripetal_catmull_rom(p: [Point3<f64>; 4], u: f64) -> Point3<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn serde_round_trip_rebuilds_the_arc_table_and_validates() {
+        let spline = Spline::new(vec![
+            Point3::new(0.0, 0.0, 0.0),
+            Point3::new(0.0, 0.3, 1.0),
+            Point3::new(1.0, 0.0, 2.0),
+        ])
+        .unwrap();
+        let json = serde_json::to_string(&spline).unwrap();
+        let back: Spline = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, spline);
+        assert!((back.length() - spline.length()).abs() < 1e-12);
+        assert_eq!(back.point_at_fraction(0.5), spline.point_at_fraction(0.5));
+        let coincident = r#"{"control_points":[[0,0,0],[0,0,0]]}"#;
+        let error = serde_json::from_str::<Spline>(coincident).unwrap_err();
+        assert!(error.to_string().contains("coincide"), "{error}");
+    }
 
     #[test]
     fn passes_through_control_points() {
