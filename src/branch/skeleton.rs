@@ -191,13 +191,14 @@ pub fn automatic_skeleton(
         return Err(SkeletonError::TooFewPoints(0));
     }
 
-    // Root: the lowest point among those horizontally nearest the axis.
+    // Root: in the largest component (the others are joined to it), the lowest point among
+    // those horizontally nearest the axis.
     let horizontal = |p: &Point3<f64>| {
         let d = p - axis_point;
         (d - up * up.dot(&d)).norm()
     };
     let height = |p: &Point3<f64>| up.dot(&(p - axis_point));
-    let candidates: Vec<usize> = groups.iter().flatten().copied().collect();
+    let candidates: Vec<usize> = groups[0].clone();
     let mut by_axis: Vec<f64> = candidates.iter().map(|&i| horizontal(&points[i])).collect();
     by_axis.sort_by(f64::total_cmp);
     let near_axis = by_axis[(by_axis.len() - 1) / 4];
