@@ -1,6 +1,8 @@
 //! Interactive edits on a small synthetic plant: merge then split along the true boundary,
 //! split then merge, undo/redo, project save/reload/replay, and a save killed mid-way.
 
+mod common;
+
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -10,16 +12,16 @@ use frond::edit::{Command, EditError, PixelRef, Session, open_project, save_sess
 use frond::eval::{GroundTruth, LeafScores, MatchingOptions, score_leaves};
 use frond::graph::pipeline::{SegmentLabel, SegmentOptions, segment_scene};
 use frond::scene::Scene;
-use frond::synth::{Preset, SynthOptions, write_dataset};
+use frond::synth::{Preset, SynthOptions};
 use frond::util::progress::NoProgress;
 use nalgebra::Point2;
 use tempfile::TempDir;
 
 fn dataset() -> &'static Path {
-    static DIR: OnceLock<TempDir> = OnceLock::new();
-    DIR.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let options = SynthOptions {
+    static DIR: OnceLock<(TempDir, PathBuf)> = OnceLock::new();
+    common::synth_dataset(
+        &DIR,
+        SynthOptions {
             preset: Preset::Broadleaf,
             seed: 43,
             views: 16,
@@ -27,13 +29,8 @@ fn dataset() -> &'static Path {
             height: 360,
             target_points: 25_000,
             ..SynthOptions::default()
-        };
-        write_dataset(&options, &dir.path().join("plant"), &NoProgress).unwrap();
-        dir
-    })
-    .path()
-    .join("plant")
-    .leak()
+        },
+    )
 }
 
 fn truth() -> &'static GroundTruth {

@@ -3,22 +3,23 @@
 //! opens in a Python glTF reader; missing photos and broken files make notes or clear errors,
 //! never a crash.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
 
 use assert_cmd::cargo::cargo_bin_cmd;
-use frond::synth::{Preset, SynthOptions, write_dataset};
-use frond::util::progress::NoProgress;
+use frond::synth::{Preset, SynthOptions};
 use serde_json::Value;
 use tempfile::TempDir;
 
 /// One small broadleaf dataset (a seed not used for tuning) shared by the tests of this file.
 fn dataset() -> &'static Path {
-    static DIR: OnceLock<TempDir> = OnceLock::new();
-    DIR.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let options = SynthOptions {
+    static DIR: OnceLock<(TempDir, PathBuf)> = OnceLock::new();
+    common::synth_dataset(
+        &DIR,
+        SynthOptions {
             preset: Preset::Broadleaf,
             seed: 11,
             views: 16,
@@ -26,13 +27,8 @@ fn dataset() -> &'static Path {
             height: 360,
             target_points: 30_000,
             ..SynthOptions::default()
-        };
-        write_dataset(&options, &dir.path().join("plant"), &NoProgress).unwrap();
-        dir
-    })
-    .path()
-    .join("plant")
-    .leak()
+        },
+    )
 }
 
 /// `frond reconstruct` of the shared dataset, once.

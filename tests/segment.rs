@@ -1,21 +1,23 @@
 //! Leaf segmentation end to end on a small synthetic plant, and its failure modes.
 
-use std::path::Path;
+mod common;
+
+use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use frond::eval::{EvalOptions, GroundTruth, Prediction, evaluate};
 use frond::graph::pipeline::{SegmentError, SegmentOptions, segment_scene, write_segmentation};
 use frond::scene::{ModelFormat, Scene, SceneSource, read_model, write_model};
-use frond::synth::{Preset, SynthOptions, write_dataset};
+use frond::synth::{Preset, SynthOptions};
 use frond::util::progress::NoProgress;
 use tempfile::TempDir;
 
 /// A small broadleaf capture (seed not used for tuning).
 fn dataset() -> &'static Path {
-    static DIR: OnceLock<TempDir> = OnceLock::new();
-    DIR.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let options = SynthOptions {
+    static DIR: OnceLock<(TempDir, PathBuf)> = OnceLock::new();
+    common::synth_dataset(
+        &DIR,
+        SynthOptions {
             preset: Preset::Broadleaf,
             seed: 41,
             views: 16,
@@ -23,13 +25,8 @@ fn dataset() -> &'static Path {
             height: 360,
             target_points: 25_000,
             ..SynthOptions::default()
-        };
-        write_dataset(&options, &dir.path().join("plant"), &NoProgress).unwrap();
-        dir
-    })
-    .path()
-    .join("plant")
-    .leak()
+        },
+    )
 }
 
 #[test]

@@ -3,7 +3,7 @@
 
 mod common;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use frond::eval::{EvalOptions, EvalReport, GroundTruth, Prediction, evaluate};
@@ -11,16 +11,15 @@ use frond::mesh::TriMesh;
 use frond::model::gltf::{ExportNode, write_glb};
 use frond::model::{segmentation_ply, write_segmentation_ply};
 use frond::scene::{ModelFormat, read_model};
-use frond::synth::{Preset, SynthOptions, write_dataset};
-use frond::util::progress::NoProgress;
+use frond::synth::{Preset, SynthOptions};
 use tempfile::TempDir;
 
 /// One small broadleaf dataset shared by the tests of this file.
 fn dataset() -> &'static Path {
-    static DIR: OnceLock<TempDir> = OnceLock::new();
-    DIR.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let options = SynthOptions {
+    static DIR: OnceLock<(TempDir, PathBuf)> = OnceLock::new();
+    common::synth_dataset(
+        &DIR,
+        SynthOptions {
             preset: Preset::Broadleaf,
             seed: 3,
             views: 10,
@@ -28,13 +27,8 @@ fn dataset() -> &'static Path {
             height: 240,
             target_points: 12_000,
             ..SynthOptions::default()
-        };
-        write_dataset(&options, &dir.path().join("plant"), &NoProgress).unwrap();
-        dir
-    })
-    .path()
-    .join("plant")
-    .leak()
+        },
+    )
 }
 
 #[test]

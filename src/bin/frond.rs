@@ -479,7 +479,7 @@ fn reconstruct(
     let skeleton_path = out.join("skeleton.json");
     frond::util::atomic::write_atomic(
         &skeleton_path,
-        serde_json::to_string_pretty(&frond::branch::plant::skeleton_records(&branches))?
+        serde_json::to_string_pretty(&frond::branch::plant::skeleton_records(&branches, 0.002, 8))?
             .as_bytes(),
     )
     .with_context(|| format!("writing {}", skeleton_path.display()))?;

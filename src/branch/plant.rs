@@ -48,7 +48,8 @@ pub fn session_skeleton(
     )
 }
 
-/// One branch in `skeleton.json` (the schema of a synthetic dataset's `gt/branches.json`).
+/// One branch as written to `skeleton.json` and to a synthetic dataset's `gt/branches.json`
+/// (the schema `frond eval` reads).
 #[derive(Clone, Debug, Serialize)]
 pub struct SkeletonRecord {
     pub id: u32,
@@ -58,37 +59,36 @@ pub struct SkeletonRecord {
     pub radius_start: f64,
     pub radius_end: f64,
     pub length: f64,
-    /// Points along the skeleton about every 2 mm (at least 8).
+    /// Points along the skeleton about every `spacing` metres, for distance metrics.
     pub centerline: Vec<[f64; 3]>,
 }
 
-/// The tree as `skeleton.json` records.
-pub fn skeleton_records(tree: &BranchTree) -> Vec<SkeletonRecord> {
+/// The tree as records, centrelines sampled about every `spacing` metres (at least
+/// `min_samples` points, at most 2,000).
+pub fn skeleton_records(
+    tree: &BranchTree,
+    spacing: f64,
+    min_samples: usize,
+) -> Vec<SkeletonRecord> {
+    let as_array = |p: &Point3<f64>| [p.x, p.y, p.z];
     tree.branches
         .iter()
         .map(|b| {
+            let skeleton = &b.cylinder.skeleton;
             let length = b.cylinder.length();
-            let samples = ((length / 0.002).ceil() as usize).clamp(8, 2000);
+            let samples = ((length / spacing).ceil() as usize).clamp(min_samples.max(2), 2000);
             SkeletonRecord {
                 id: b.id,
                 parent: b.parent,
                 parent_fraction: b.parent_fraction,
-                control_points: b
-                    .cylinder
-                    .skeleton
-                    .control_points()
-                    .iter()
-                    .map(|p| [p.x, p.y, p.z])
-                    .collect(),
+                control_points: skeleton.control_points().iter().map(as_array).collect(),
                 radius_start: b.cylinder.radius_start,
                 radius_end: b.cylinder.radius_end,
                 length,
-                centerline: b
-                    .cylinder
-                    .skeleton
+                centerline: skeleton
                     .sample_by_arc_length(samples)
                     .iter()
-                    .map(|(p, _)| [p.x, p.y, p.z])
+                    .map(|(p, _)| as_array(p))
                     .collect(),
             }
         })

@@ -381,14 +381,21 @@ pub fn automatic_skeleton(
         let length: f64 = polyline.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
         // Spurs: too short, or ending within a few radii of the parent's axis (parts of a
         // thick stem's ring that lag behind in geodesic distance hug its surface).
-        let hugs_parent = match (parent, attachment, polyline.last()) {
-            (Some(p), Some(a), Some(tip)) => {
-                let parent_branch = &branches[p as usize];
-                let cylinder = &parent_branch.cylinder;
+        // Where a side branch leaves its parent (arc fraction on the parent).
+        let parent_fraction = match (parent, attachment) {
+            (Some(p), Some(a)) => Some(attachment_fraction(
+                &branches[p as usize],
+                &nodes[a].centroid,
+            )),
+            _ => None,
+        };
+        let hugs_parent = match (parent, parent_fraction, polyline.last()) {
+            (Some(p), Some(fraction), Some(tip)) => {
+                let cylinder = &branches[p as usize].cylinder;
                 let radius = cylinder
-                    .radius_at(attachment_fraction(parent_branch, &nodes[a].centroid))
+                    .radius_at(fraction)
                     .max(0.5 * (cylinder.radius_start + cylinder.radius_end));
-                parent_branch.cylinder.skeleton.distance_to(tip) < 2.5 * radius
+                cylinder.skeleton.distance_to(tip) < 2.5 * radius
             }
             _ => false,
         };
@@ -399,10 +406,7 @@ pub fn automatic_skeleton(
         let Some(branch) = branch_from_chain(
             branches.len() as u32,
             parent,
-            attachment.and_then(|a| {
-                let parent_branch = &branches[parent? as usize];
-                Some(attachment_fraction(parent_branch, &nodes[a].centroid))
-            }),
+            parent_fraction,
             &polyline,
             &chain,
             &nodes,
@@ -577,7 +581,6 @@ fn branch_from_chain(
         return None;
     }
     let skeleton = Spline::new(control).ok()?;
-    let length = skeleton.length().max(1e-12);
     // (arc fraction, radius) per chain node: median distance from the local axis.
     let offset = polyline.len() - chain.len();
     let mut arc = vec![0.0; polyline.len()];
@@ -610,7 +613,6 @@ fn branch_from_chain(
         })
         .collect();
     let (radius_start, radius_end) = fit_linear(&samples);
-    let _ = length;
     Some(Branch {
         id,
         parent,

@@ -102,16 +102,11 @@ impl Stroke {
     /// whose ends are extended along their directions.
     pub fn side(&self, p: &Point2<f64>) -> Side {
         if self.closed {
-            let mut inside = false;
-            for (a, b) in self.segments() {
-                if (a.y > p.y) != (b.y > p.y) {
-                    let x = a.x + (p.y - a.y) / (b.y - a.y) * (b.x - a.x);
-                    if p.x < x {
-                        inside = !inside;
-                    }
-                }
-            }
-            return if inside { Side::Inside } else { Side::Outside };
+            return if crate::util::polygon::inside_polygon(p, &self.points) {
+                Side::Inside
+            } else {
+                Side::Outside
+            };
         }
         // Nearest segment of the polyline extended at both ends.
         let n = self.points.len();

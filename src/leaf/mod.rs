@@ -24,6 +24,7 @@ use crate::edit::{EditError, Session};
 use crate::graph::pipeline::SegmentLabel;
 use crate::scene::ImageFileStatus;
 use crate::segment::boundary::Boundary;
+use crate::util::polygon;
 use crate::util::progress::Progress;
 
 /// Which segment and view the generic leaf is taken from.
@@ -221,7 +222,7 @@ fn region_overlaps(polygons: &[Vec<Point2<f64>>]) -> Vec<Vec<f64>> {
                         lo.x + (hi.x - lo.x) * ((k % GRID) as f64 + 0.5) / GRID as f64,
                         lo.y + (hi.y - lo.y) * ((k / GRID) as f64 + 0.5) / GRID as f64,
                     );
-                    fit::inside_polygon(&q, polygon)
+                    polygon::inside_polygon(&q, polygon)
                 })
                 .collect()
         })
@@ -260,7 +261,7 @@ fn consensus_region(regions: &[(usize, Vec<Point2<f64>>)]) -> Option<(usize, f64
     (0..regions.len())
         .filter(|&i| i == medoid || overlaps[medoid][i] >= CONSISTENT_IOU)
         .max_by(|&a, &b| {
-            fit::polygon_area(&polygons[a]).total_cmp(&fit::polygon_area(&polygons[b]))
+            polygon::polygon_area(&polygons[a]).total_cmp(&polygon::polygon_area(&polygons[b]))
         })
         .map(|i| {
             let others = regions.len().saturating_sub(1);
@@ -329,7 +330,7 @@ pub fn extract_template(
             lo.x + (i as f64 + 0.5) / size as f64 * (hi.x - lo.x),
             hi.y - (j as f64 + 0.5) / size as f64 * (hi.y - lo.y),
         );
-        let inside = fit::inside_polygon(&q, &outline);
+        let inside = polygon::inside_polygon(&q, &outline);
         let world = frame.to_world(&q, heights.at(&q));
         let rgb = photo
             .as_ref()
@@ -485,14 +486,14 @@ pub fn choose_boundaries(
             && let Some(r) = regions.iter().find(|r| r.0 == view)
         {
             let solidity = if r.1.len() >= 3 {
-                fit::solidity(&r.1)
+                polygon::solidity(&r.1)
             } else {
                 let image: Vec<Point2<f64>> =
                     r.2.polygon
                         .iter()
                         .map(|p| Point2::new(p[0], p[1]))
                         .collect();
-                fit::solidity(&image)
+                polygon::solidity(&image)
             };
             chosen.insert(
                 segment,

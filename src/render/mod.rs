@@ -734,26 +734,12 @@ impl Renderer {
                         store: wgpu::StoreOp::Discard,
                     },
                 })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &targets.depth_msaa,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(1.0),
-                        store: wgpu::StoreOp::Discard,
-                    }),
-                    stencil_ops: None,
-                }),
+                depth_stencil_attachment: Some(cleared_depth(&targets.depth_msaa)),
                 timestamp_writes: None,
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            pass.set_pipeline(&self.color_pipeline);
-            pass.set_bind_group(0, &view_group, &[]);
-            for mesh in &scene.meshes {
-                pass.set_bind_group(1, &mesh.bind_group, &[]);
-                pass.set_vertex_buffer(0, mesh.vertices.slice(..));
-                pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
-                pass.draw_indexed(0..mesh.index_count, 0, 0..1);
-            }
+            draw_meshes(&mut pass, &self.color_pipeline, &view_group, scene);
         }
         let id_view = targets
             .id
@@ -782,26 +768,12 @@ impl Renderer {
                         ops: clear(wgpu::StoreOp::Store),
                     }),
                 ],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &targets.depth_single,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(1.0),
-                        store: wgpu::StoreOp::Discard,
-                    }),
-                    stencil_ops: None,
-                }),
+                depth_stencil_attachment: Some(cleared_depth(&targets.depth_single)),
                 timestamp_writes: None,
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            pass.set_pipeline(&self.id_pipeline);
-            pass.set_bind_group(0, &view_group, &[]);
-            for mesh in &scene.meshes {
-                pass.set_bind_group(1, &mesh.bind_group, &[]);
-                pass.set_vertex_buffer(0, mesh.vertices.slice(..));
-                pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
-                pass.draw_indexed(0..mesh.index_count, 0, 0..1);
-            }
+            draw_meshes(&mut pass, &self.id_pipeline, &view_group, scene);
         }
         let readbacks = [
             (&targets.color_resolved, 4u32),
@@ -886,6 +858,35 @@ impl Renderer {
             depth,
             object_id,
         })
+    }
+}
+
+/// A depth attachment cleared to the far plane and not kept after the pass.
+fn cleared_depth(view: &wgpu::TextureView) -> wgpu::RenderPassDepthStencilAttachment<'_> {
+    wgpu::RenderPassDepthStencilAttachment {
+        view,
+        depth_ops: Some(wgpu::Operations {
+            load: wgpu::LoadOp::Clear(1.0),
+            store: wgpu::StoreOp::Discard,
+        }),
+        stencil_ops: None,
+    }
+}
+
+/// Draws every mesh of the scene with one pipeline and the view's bind group.
+fn draw_meshes(
+    pass: &mut wgpu::RenderPass<'_>,
+    pipeline: &wgpu::RenderPipeline,
+    view_group: &wgpu::BindGroup,
+    scene: &GpuScene,
+) {
+    pass.set_pipeline(pipeline);
+    pass.set_bind_group(0, view_group, &[]);
+    for mesh in &scene.meshes {
+        pass.set_bind_group(1, &mesh.bind_group, &[]);
+        pass.set_vertex_buffer(0, mesh.vertices.slice(..));
+        pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+        pass.draw_indexed(0..mesh.index_count, 0, 0..1);
     }
 }
 

@@ -702,19 +702,6 @@ struct LeafRecord {
     mesh: String,
 }
 
-#[derive(Serialize)]
-struct BranchRecord {
-    id: u32,
-    parent: Option<u32>,
-    parent_fraction: f64,
-    control_points: Vec<[f64; 3]>,
-    radius_start: f64,
-    radius_end: f64,
-    length: f64,
-    /// Skeleton sampled every ~5 mm, for distance metrics.
-    centerline: Vec<[f64; 3]>,
-}
-
 fn write_ground_truth(
     root: &Path,
     options: &SynthOptions,
@@ -802,37 +789,8 @@ fn write_ground_truth(
     }
     write_json(&gt.join("leaves.json"), &records)?;
 
-    let branches: Vec<BranchRecord> = plant
-        .branches
-        .branches
-        .iter()
-        .map(|b| {
-            let length = b.cylinder.length();
-            let samples = ((length / 0.005).ceil() as usize).max(2);
-            BranchRecord {
-                id: b.id,
-                parent: b.parent,
-                parent_fraction: b.parent_fraction,
-                control_points: b
-                    .cylinder
-                    .skeleton
-                    .control_points()
-                    .iter()
-                    .map(|p| [p.x, p.y, p.z])
-                    .collect(),
-                radius_start: b.cylinder.radius_start,
-                radius_end: b.cylinder.radius_end,
-                length,
-                centerline: b
-                    .cylinder
-                    .skeleton
-                    .sample_by_arc_length(samples)
-                    .iter()
-                    .map(|(p, _)| [p.x, p.y, p.z])
-                    .collect(),
-            }
-        })
-        .collect();
+    // Centrelines every ~5 mm, for distance metrics.
+    let branches = crate::branch::plant::skeleton_records(&plant.branches, 0.005, 2);
     write_json(&gt.join("branches.json"), &branches)?;
 
     // Dense surface samples of the plant (leaves and stems), ~2 mm apart.

@@ -3,6 +3,26 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::OnceLock;
+
+use frond::synth::{SynthOptions, write_dataset};
+use frond::util::progress::NoProgress;
+use tempfile::TempDir;
+
+/// A synthetic dataset written once per test binary into `cell` (as `<tempdir>/plant`).
+pub fn synth_dataset(
+    cell: &'static OnceLock<(TempDir, PathBuf)>,
+    options: SynthOptions,
+) -> &'static Path {
+    &cell
+        .get_or_init(|| {
+            let dir = tempfile::tempdir().unwrap();
+            let root = dir.path().join("plant");
+            write_dataset(&options, &root, &NoProgress).unwrap();
+            (dir, root)
+        })
+        .1
+}
 
 /// `../shared/data/<relative>` (real third-party data beside the checkout).
 pub fn shared_data(relative: &str) -> PathBuf {
