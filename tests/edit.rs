@@ -546,3 +546,491 @@ fn killed_save_leaves_the_previous_project_intact() {
         assert_eq!(&read, &versions[&marker]);
     }
 }
+
+// ---- Branch edits (seed 004 §7) ----
+
+use frond::branch::BranchTree;
+use frond::edit::{BranchEnd, BranchStroke, BranchTarget, ViewCamera};
+use frond::eval::SkeletonBranch;
+use nalgebra::Point3;
+
+/// Mean distance from points along a branch's skeleton to a GT centreline.
+fn mean_distance_to(tree: &BranchTree, id: u32, truth: &SkeletonBranch) -> f64 {
+    let polyline: Vec<Point3<f64>> = truth.centerline.iter().map(|p| Point3::from(*p)).collect();
+    let samples = tree
+        .get(id)
+        .unwrap()
+        .cylinder
+        .skeleton
+        .sample_by_arc_length(50);
+    samples
+        .iter()
+        .map(|(p, _)| {
+            polyline
+                .windows(2)
+                .map(|w| frond::branch::spline::point_segment_distance(p, &w[0], &w[1]))
+                .fold(f64::INFINITY, f64::min)
+        })
+        .sum::<f64>()
+        / samples.len() as f64
+}
+
+/// The GT centreline projected into a view, and its length there in pixels.
+fn projected_centerline(session: &Session, view: usize, truth: &SkeletonBranch) -> Vec<[f64; 2]> {
+    let model = &session.scene().reconstruction;
+    let image = &model.images()[view];
+    truth
+        .centerline
+        .iter()
+        .filter_map(|p| model.project(image, &Point3::from(*p)))
+        .map(|uv| [uv.x, uv.y])
+        .collect()
+}
+
+fn stroke_length(stroke: &[[f64; 2]]) -> f64 {
+    stroke
+        .windows(2)
+        .map(|w| ((w[1][0] - w[0][0]).powi(2) + (w[1][1] - w[0][1]).powi(2)).sqrt())
+        .sum()
+}
+
+/// The view a user would draw a GT branch in: not foreshortened, and where most of its
+/// surface is seen (GT stem points observed in the view projecting within 4 px of its
+/// centreline).
+fn best_view_for(session: &Session, truth_branch: &SkeletonBranch) -> usize {
+    let model = &session.scene().reconstruction;
+    let points = &session.segmentation().points;
+    let parts = truth().points.parts.as_ref().unwrap();
+    let visible = |view: usize| {
+        let stroke = projected_centerline(session, view, truth_branch);
+        (0..points.len())
+            .filter(|&p| parts[p] == frond::synth::Part::Stem)
+            .filter(|&p| points.views[p].binary_search(&(view as u32)).is_ok())
+            .filter_map(|p| model.project(&model.images()[view], &points.positions[p]))
+            .filter(|uv| {
+                stroke
+                    .iter()
+                    .any(|s| (uv - Point2::new(s[0], s[1])).norm() < 4.0)
+            })
+            .count()
+    };
+    // Among the views where it is not foreshortened (at least 70 % of its longest
+    // projection), the one where it is most visible.
+    let lengths: Vec<f64> = (0..model.images().len())
+        .map(|v| stroke_length(&projected_centerline(session, v, truth_branch)))
+        .collect();
+    let longest = lengths.iter().copied().fold(0.0, f64::max);
+    (0..model.images().len())
+        .filter(|&v| lengths[v] >= 0.7 * longest)
+        .max_by_key(|&v| (visible(v), std::cmp::Reverse(v)))
+        .unwrap()
+}
+
+/// A session whose tree is empty (the automatic skeleton deleted, undoably).
+fn session_without_branches() -> Session {
+    let mut session = session();
+    let root = session
+        .branches()
+        .branches
+        .iter()
+        .find(|b| b.parent.is_none())
+        .map(|b| b.id)
+        .expect("the automatic skeleton has a main stem");
+    session
+        .apply(Command::DeleteBranch { branch: root })
+        .unwrap();
+    assert!(session.branches().branches.is_empty());
+    session
+}
+
+/// The GT stem and its longest petiole.
+fn stem_and_petiole() -> (&'static SkeletonBranch, &'static SkeletonBranch) {
+    let branches = &truth().branches;
+    let stem = branches.iter().find(|b| b.parent.is_none()).unwrap();
+    let petiole = branches
+        .iter()
+        .filter(|b| b.parent == Some(stem.id))
+        .max_by(|a, b| a.length().total_cmp(&b.length()))
+        .unwrap();
+    (stem, petiole)
+}
+
+/// The 3D panel's camera placed at a photo (the synthetic photos are centred pinholes).
+fn view_camera_of_photo(session: &Session, view: usize) -> ViewCamera {
+    let image = &session.scene().reconstruction.images()[view];
+    let camera = session.scene().reconstruction.camera_of(image);
+    let (fx, _, cx, cy) = camera.focal_and_principal_point();
+    assert!((cx - 0.5 * camera.width as f64).abs() < 1e-9);
+    assert!((cy - 0.5 * camera.height as f64).abs() < 1e-9);
+    let q = image.camera_from_world.rotation.quaternion();
+    let t = image.camera_from_world.translation.vector;
+    ViewCamera {
+        rotation: [q.w, q.i, q.j, q.k],
+        translation: [t.x, t.y, t.z],
+        focal_px: fx,
+        width: camera.width,
+        height: camera.height,
+    }
+}
+
+#[test]
+fn a_petiole_drawn_in_a_photo_or_the_3d_view_follows_the_true_one() {
+    let mut session = session();
+    let (_, petiole) = stem_and_petiole();
+    let view = best_view_for(&session, petiole);
+    let image_id = session.scene().reconstruction.images()[view].id;
+    let stroke = projected_centerline(&session, view, petiole);
+    let before = session.branches().clone();
+    session
+        .apply(Command::DrawBranch {
+            stroke: BranchStroke::Image {
+                image_id,
+                stroke: stroke.clone(),
+            },
+            radius: None,
+        })
+        .unwrap();
+    let tree = session.branches().clone();
+    assert_eq!(tree.branches.len(), before.branches.len() + 1);
+    let drawn = tree.branches.last().unwrap();
+    let parent = tree
+        .get(drawn.parent.expect("it grows from a branch"))
+        .unwrap();
+    let start = drawn.cylinder.skeleton.control_points()[0];
+    assert!(
+        (parent
+            .cylinder
+            .skeleton
+            .point_at_fraction(drawn.parent_fraction)
+            - start)
+            .norm()
+            < 1e-9,
+        "it starts on its parent"
+    );
+    assert!(drawn.cylinder.radius_start < parent.cylinder.radius_at(drawn.parent_fraction));
+    let error = mean_distance_to(&tree, drawn.id, petiole);
+    eprintln!(
+        "petiole ({:.3} m) drawn in photo {view}: mean distance {error:.5} m ({:.1} % of its length)",
+        petiole.length(),
+        100.0 * error / petiole.length()
+    );
+    assert!(error < 0.05 * petiole.length(), "{error}");
+
+    // The same stroke in the 3D panel's camera placed at that photo (its snap points are not
+    // limited to those the photo sees).
+    session.undo();
+    session
+        .apply(Command::DrawBranch {
+            stroke: BranchStroke::View {
+                camera: view_camera_of_photo(&session, view),
+                stroke,
+            },
+            radius: None,
+        })
+        .unwrap();
+    let from_view = session.branches().clone();
+    let view_error = mean_distance_to(&from_view, from_view.branches.last().unwrap().id, petiole);
+    eprintln!("petiole drawn in the 3D view: mean distance {view_error:.5} m");
+    assert!(view_error < 0.05 * petiole.length(), "{view_error}");
+}
+
+#[test]
+fn a_main_stem_drawn_on_an_empty_tree_is_the_root() {
+    let mut session = session_without_branches();
+    let (stem, _) = stem_and_petiole();
+    let view = best_view_for(&session, stem);
+    let image_id = session.scene().reconstruction.images()[view].id;
+    session
+        .apply(Command::DrawBranch {
+            stroke: BranchStroke::Image {
+                image_id,
+                stroke: projected_centerline(&session, view, stem),
+            },
+            radius: None,
+        })
+        .unwrap();
+    let tree = session.branches();
+    assert_eq!(tree.branches.len(), 1);
+    assert_eq!(tree.branches[0].parent, None);
+    let error = mean_distance_to(tree, tree.branches[0].id, stem);
+    let radius = 0.5 * (stem.radius_start + stem.radius_end);
+    eprintln!(
+        "stem ({:.3} m long, radius {radius:.4}) drawn in photo {view}: mean distance {error:.4} m = {:.2} radii",
+        stem.length(),
+        error / radius
+    );
+    assert!(
+        error < radius,
+        "within a radius of the true centreline: {error}"
+    );
+}
+
+#[test]
+fn branches_drawn_in_3d_snap_to_the_points() {
+    let mut session = session_without_branches();
+    let (stem, petiole) = stem_and_petiole();
+    // The GT centrelines with 3 mm of noise, as a hand in a 3D view would draw them.
+    let mut rng = frond::util::rng::Rng::seed_from(7);
+    let mut noisy = |b: &SkeletonBranch| -> Vec<[f64; 3]> {
+        b.centerline
+            .iter()
+            .map(|p| {
+                [
+                    p[0] + rng.range(-0.003, 0.003),
+                    p[1] + rng.range(-0.003, 0.003),
+                    p[2] + rng.range(-0.003, 0.003),
+                ]
+            })
+            .collect()
+    };
+    let (stem_stroke, petiole_stroke) = (noisy(stem), noisy(petiole));
+    session
+        .apply(Command::DrawBranch {
+            stroke: BranchStroke::World {
+                points: stem_stroke,
+            },
+            radius: Some([0.004, 0.003]),
+        })
+        .unwrap();
+    session
+        .apply(Command::DrawBranch {
+            stroke: BranchStroke::World {
+                points: petiole_stroke.clone(),
+            },
+            radius: None,
+        })
+        .unwrap();
+    let tree = session.branches().clone();
+    assert_eq!(tree.branches.len(), 2);
+    assert_eq!(tree.branches[1].parent, Some(tree.branches[0].id));
+    assert_eq!(tree.branches[0].cylinder.radius_start, 0.004);
+    let stroke_error = {
+        let mut unsnapped = BranchTree::default();
+        unsnapped.branches.push(tree.branches[1].clone());
+        unsnapped.branches[0].cylinder.skeleton =
+            frond::branch::Spline::new(petiole_stroke.iter().map(|p| Point3::from(*p)).collect())
+                .unwrap();
+        mean_distance_to(&unsnapped, unsnapped.branches[0].id, petiole)
+    };
+    let snapped_error = mean_distance_to(&tree, tree.branches[1].id, petiole);
+    eprintln!(
+        "3D stroke: {stroke_error:.5} m from the petiole, snapped branch {snapped_error:.5} m"
+    );
+    assert!(snapped_error < stroke_error, "snapping brings it closer");
+}
+
+#[test]
+fn branch_edits_undo_redo_and_replay() {
+    let mut session = session();
+    let initial = session.branches().clone();
+    assert!(!initial.branches.is_empty(), "automatic skeleton");
+    let root = initial
+        .branches
+        .iter()
+        .find(|b| b.parent.is_none())
+        .unwrap();
+    let child = initial
+        .branches
+        .iter()
+        .find(|b| b.parent == Some(root.id))
+        .expect("a branch on the stem");
+    let view = 0;
+    let image_id = session.scene().reconstruction.images()[view].id;
+    let tip = *child.cylinder.skeleton.control_points().last().unwrap();
+    let tip_pixel = session
+        .scene()
+        .reconstruction
+        .project(&session.scene().reconstruction.images()[view], &tip)
+        .unwrap();
+    let middle = root.cylinder.skeleton.control_points().len() / 2;
+    let commands = vec![
+        Command::SetRadius {
+            branch: child.id,
+            end: BranchEnd::Start,
+            radius: 0.0021,
+        },
+        Command::SetLeafAtTip {
+            branch: child.id,
+            enabled: true,
+        },
+        Command::MoveBranch {
+            branch: child.id,
+            control_point: child.cylinder.skeleton.control_points().len() - 1,
+            to: BranchTarget::Image {
+                at: PixelRef {
+                    image_id,
+                    pixel: [tip_pixel.x + 15.0, tip_pixel.y - 10.0],
+                },
+            },
+        },
+        Command::MoveBranch {
+            branch: root.id,
+            control_point: middle,
+            to: BranchTarget::World {
+                position: {
+                    let p = root.cylinder.skeleton.control_points()[middle];
+                    [p.x + 0.01, p.y, p.z]
+                },
+            },
+        },
+        Command::MoveBranch {
+            branch: child.id,
+            control_point: 0,
+            to: BranchTarget::World {
+                position: [tip.x, tip.y, tip.z],
+            },
+        },
+        Command::DeleteBranch { branch: child.id },
+        Command::AutomaticSkeleton,
+    ];
+    let mut trees = vec![initial.clone()];
+    for command in commands.clone() {
+        let description = command.describe();
+        session
+            .apply(command)
+            .unwrap_or_else(|e| panic!("{description}: {e}"));
+        trees.push(session.branches().clone());
+    }
+    // Each edit did what it says.
+    let edited_child = |k: usize| trees[k].get(child.id).unwrap().clone();
+    assert_eq!(edited_child(1).cylinder.radius_start, 0.0021);
+    assert!(edited_child(2).leaf_at_tip);
+    let moved_tip = *edited_child(3)
+        .cylinder
+        .skeleton
+        .control_points()
+        .last()
+        .unwrap();
+    let depth =
+        |p: &Point3<f64>| (session.scene().reconstruction.images()[view].camera_from_world * p).z;
+    assert!(
+        (depth(&moved_tip) - depth(&tip)).abs() < 1e-9,
+        "a drag keeps the depth"
+    );
+    let reprojected = session
+        .scene()
+        .reconstruction
+        .project(&session.scene().reconstruction.images()[view], &moved_tip)
+        .unwrap();
+    assert!((reprojected - Point2::new(tip_pixel.x + 15.0, tip_pixel.y - 10.0)).norm() < 1e-6);
+    // Moving the stem carries every child's start along.
+    for tree in &trees[4..6] {
+        let stem = tree.get(root.id).unwrap();
+        for b in tree.branches.iter().filter(|b| b.parent == Some(root.id)) {
+            let start = b.cylinder.skeleton.control_points()[0];
+            assert!(stem.cylinder.skeleton.distance_to(&start) < 1e-4 * stem.cylinder.length());
+            assert!(
+                (stem.cylinder.skeleton.point_at_fraction(b.parent_fraction) - start).norm() < 1e-9
+            );
+        }
+    }
+    assert_ne!(
+        edited_child(5).parent_fraction,
+        edited_child(4).parent_fraction,
+        "the start slid"
+    );
+    assert!(trees[6].get(child.id).is_none());
+    assert_eq!(
+        trees[7], initial,
+        "the automatic skeleton of unchanged labels is the first one"
+    );
+
+    for expected in trees.iter().rev().skip(1) {
+        assert!(session.undo());
+        assert_eq!(session.branches(), expected);
+    }
+    for expected in trees.iter().skip(1) {
+        assert!(session.redo());
+        assert_eq!(session.branches(), expected);
+    }
+    // A project with branch edits reopens to the same tree, with the undo position.
+    for _ in 0..3 {
+        session.undo();
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("branches.frond");
+    save_session(&session, &path).unwrap();
+    let mut reopened = open_project(&path, &NoProgress).unwrap();
+    assert_eq!(reopened.branches(), session.branches());
+    assert!(reopened.redo());
+    assert!(session.redo());
+    assert_eq!(reopened.branches(), session.branches());
+}
+
+#[test]
+fn bad_branch_edits_are_refused_without_changes() {
+    let mut session = session();
+    let before = session.branches().clone();
+    let image_id = session.scene().reconstruction.images()[0].id;
+    let id = before.branches[0].id;
+    let count = before.branches[0].cylinder.skeleton.control_points().len();
+    let refused = [
+        Command::DeleteBranch { branch: 999 },
+        Command::SetRadius {
+            branch: id,
+            end: BranchEnd::End,
+            radius: f64::NAN,
+        },
+        Command::SetRadius {
+            branch: id,
+            end: BranchEnd::Start,
+            radius: -1.0,
+        },
+        Command::MoveBranch {
+            branch: id,
+            control_point: count,
+            to: BranchTarget::World {
+                position: [0.0, 0.0, 0.0],
+            },
+        },
+        Command::MoveBranch {
+            branch: id,
+            control_point: 0,
+            to: BranchTarget::World {
+                position: [f64::INFINITY, 0.0, 0.0],
+            },
+        },
+        // Starts far from every branch.
+        Command::DrawBranch {
+            stroke: BranchStroke::Image {
+                image_id,
+                stroke: vec![[1.0, 1.0], [40.0, 40.0]],
+            },
+            radius: None,
+        },
+        Command::DrawBranch {
+            stroke: BranchStroke::World {
+                points: vec![[0.0, 0.0, 0.0]],
+            },
+            radius: None,
+        },
+        Command::DrawBranch {
+            stroke: BranchStroke::View {
+                camera: ViewCamera {
+                    rotation: [0.0; 4],
+                    translation: [0.0; 3],
+                    focal_px: 100.0,
+                    width: 10,
+                    height: 10,
+                },
+                stroke: vec![[1.0, 1.0], [5.0, 5.0]],
+            },
+            radius: None,
+        },
+        Command::SetLeafAtTip {
+            branch: 12345,
+            enabled: true,
+        },
+    ];
+    for command in refused {
+        let description = command.describe();
+        let error = session.apply(command).unwrap_err();
+        eprintln!("{description}: {error}");
+        assert!(
+            matches!(error, EditError::Branch(_)),
+            "{description}: {error}"
+        );
+    }
+    assert_eq!(session.branches(), &before);
+    assert!(!session.can_undo());
+}

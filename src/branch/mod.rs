@@ -247,6 +247,23 @@ pub struct Branch {
     /// Arc-length fraction on the parent where this branch starts.
     pub parent_fraction: f64,
     pub cylinder: GeneralizedCylinder,
+    /// A synthesized leaf grows at the tip (seed 004 §7: the average leaf, scaled by the
+    /// branch's thickness).
+    #[serde(default)]
+    pub leaf_at_tip: bool,
+}
+
+/// A point on a branch of a tree.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BranchPoint {
+    pub branch: u32,
+    /// Arc-length fraction along the branch.
+    pub fraction: f64,
+    pub position: Point3<f64>,
+    pub tangent: Vector3<f64>,
+    pub radius: f64,
+    /// Distance from the query point.
+    pub distance: f64,
 }
 
 /// A plant's branches, parents before children.
@@ -256,6 +273,90 @@ pub struct BranchTree {
 }
 
 impl BranchTree {
+    /// The branch with this id.
+    pub fn get(&self, id: u32) -> Option<&Branch> {
+        self.branches.iter().find(|b| b.id == id)
+    }
+
+    fn get_mut(&mut self, id: u32) -> Option<&mut Branch> {
+        self.branches.iter_mut().find(|b| b.id == id)
+    }
+
+    /// An id no branch has.
+    pub fn next_id(&self) -> u32 {
+        self.branches.iter().map(|b| b.id + 1).max().unwrap_or(0)
+    }
+
+    /// A branch and all its descendants (ids, the branch first).
+    pub fn subtree(&self, id: u32) -> Vec<u32> {
+        let mut out = vec![id];
+        let mut k = 0;
+        while k < out.len() {
+            let parent = out[k];
+            out.extend(
+                self.branches
+                    .iter()
+                    .filter(|b| b.parent == Some(parent))
+                    .map(|b| b.id),
+            );
+            k += 1;
+        }
+        out
+    }
+
+    /// The point at an arc-length fraction of a branch.
+    pub fn point_on(&self, id: u32, fraction: f64) -> Option<BranchPoint> {
+        let branch = self.get(id)?;
+        let skeleton = &branch.cylinder.skeleton;
+        let t = skeleton.parameter_at_fraction(fraction);
+        Some(BranchPoint {
+            branch: id,
+            fraction,
+            position: skeleton.point(t),
+            tangent: skeleton.tangent(t),
+            radius: branch.cylinder.radius_at(fraction),
+            distance: 0.0,
+        })
+    }
+
+    /// The closest point of any branch to `p` (`None` for an empty tree).
+    pub fn closest(&self, p: &Point3<f64>) -> Option<BranchPoint> {
+        self.branches
+            .iter()
+            .map(|b| (b.id, b.cylinder.skeleton.closest_fraction(p)))
+            .min_by(|a, b| a.1.1.total_cmp(&b.1.1).then(a.0.cmp(&b.0)))
+            .and_then(|(id, (fraction, distance))| {
+                self.point_on(id, fraction)
+                    .map(|point| BranchPoint { distance, ..point })
+            })
+    }
+
+    /// Moves the first control point of every child of `id` (and, recursively, of theirs)
+    /// onto its attachment point, after `id` changed shape.
+    pub fn reattach_children(&mut self, id: u32) -> Result<(), SplineError> {
+        let mut pending = vec![id];
+        while let Some(parent) = pending.pop() {
+            let children: Vec<(u32, f64)> = self
+                .branches
+                .iter()
+                .filter(|b| b.parent == Some(parent))
+                .map(|b| (b.id, b.parent_fraction))
+                .collect();
+            for (child, fraction) in children {
+                let Some(anchor) = self.point_on(parent, fraction) else {
+                    continue;
+                };
+                if let Some(branch) = self.get_mut(child) {
+                    let mut points = branch.cylinder.skeleton.control_points().to_vec();
+                    points[0] = anchor.position;
+                    branch.cylinder.skeleton = Spline::new(points)?;
+                }
+                pending.push(child);
+            }
+        }
+        Ok(())
+    }
+
     /// One mesh for all branches.
     pub fn mesh(&self, meshing: &CylinderMeshing) -> TriMesh {
         let mut mesh = TriMesh::default();

@@ -11,13 +11,13 @@ use crate::graph::foreground::PointClass;
 use crate::graph::pipeline::SegmentLabel;
 use crate::model::ModelBranch;
 
-/// The points a skeleton is built from: points the foreground found on thin tubes, and the
-/// points of segments labelled stem or other (never leaves or the pot).
-pub fn skeleton_points(session: &Session) -> Vec<Point3<f64>> {
+/// Indices of the points a skeleton is built from (and branch strokes snap to): points the
+/// foreground found on thin tubes, and the points of segments labelled stem or other (never
+/// leaves or the pot).
+pub fn skeleton_point_indices(session: &Session) -> Vec<u32> {
     let segmentation = session.segmentation();
-    let points = &segmentation.points;
     let segments = session.segments();
-    (0..points.len())
+    (0..segmentation.points.len())
         .filter(|&i| {
             let segment = session.segment_of()[i];
             let label = (segment >= 0)
@@ -30,7 +30,16 @@ pub fn skeleton_points(session: &Session) -> Vec<Point3<f64>> {
                 None => segmentation.foreground.class[i] == PointClass::Stem,
             }
         })
-        .map(|i| points.positions[i])
+        .map(|i| i as u32)
+        .collect()
+}
+
+/// The points a skeleton is built from (see [`skeleton_point_indices`]).
+pub fn skeleton_points(session: &Session) -> Vec<Point3<f64>> {
+    let positions = &session.segmentation().points.positions;
+    skeleton_point_indices(session)
+        .into_iter()
+        .map(|i| positions[i as usize])
         .collect()
 }
 

@@ -618,6 +618,7 @@ fn branch_from_chain(
         parent,
         parent_fraction: parent_fraction.unwrap_or(0.0),
         cylinder: GeneralizedCylinder::new(skeleton, radius_start, radius_end),
+        leaf_at_tip: false,
     })
 }
 

@@ -162,6 +162,32 @@ impl Spline {
             .collect()
     }
 
+    /// The curve's closest point to `p`: `(arc-length fraction, distance)`, over the polyline
+    /// of the arc-length table.
+    pub fn closest_fraction(&self, p: &Point3<f64>) -> (f64, f64) {
+        let total = self.length().max(1e-300);
+        let mut best = (0.0, f64::INFINITY);
+        let mut previous = (self.point(0.0), 0.0);
+        for &(t, length) in &self.arc_table[1..] {
+            let point = self.point(t);
+            let ab = point - previous.0;
+            let along = if ab.norm_squared() < 1e-30 {
+                0.0
+            } else {
+                ((p - previous.0).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0)
+            };
+            let distance = (p - (previous.0 + ab * along)).norm();
+            if distance < best.1 {
+                best = (
+                    (previous.1 + along * (length - previous.1)) / total,
+                    distance,
+                );
+            }
+            previous = (point, length);
+        }
+        (best.0.clamp(0.0, 1.0), best.1)
+    }
+
     /// Distance from `p` to the curve (sampled densely).
     pub fn distance_to(&self, p: &Point3<f64>) -> f64 {
         let n = (self.segments() * TABLE_SAMPLES_PER_SEGMENT).max(2);
@@ -250,6 +276,22 @@ mod tests {
             assert!((t - Vector3::z()).norm() < 1e-6);
         }
         assert!((spline.distance_to(&Point3::new(1.0, 0.0, 1.0)) - 1.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn closest_fraction_finds_the_foot_of_the_perpendicular() {
+        let spline = Spline::new(vec![
+            Point3::new(0.0, 0.0, 0.0),
+            Point3::new(0.0, 0.0, 1.0),
+            Point3::new(0.0, 0.0, 3.0),
+        ])
+        .unwrap();
+        let (fraction, distance) = spline.closest_fraction(&Point3::new(0.5, 0.0, 1.5));
+        assert!((fraction - 0.5).abs() < 1e-3, "{fraction}");
+        assert!((distance - 0.5).abs() < 1e-3, "{distance}");
+        let (fraction, distance) = spline.closest_fraction(&Point3::new(0.0, 0.0, -2.0));
+        assert_eq!(fraction, 0.0);
+        assert!((distance - 2.0).abs() < 1e-9);
     }
 
     #[test]

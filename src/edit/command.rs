@@ -12,6 +12,57 @@ pub struct PixelRef {
     pub pixel: [f64; 2],
 }
 
+/// A pinhole view that is not one of the photos (the 3D panel's camera), with COLMAP's
+/// conventions: x right, y down, z forward; pixel centres at +0.5.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ViewCamera {
+    /// Rotation of `camera_from_world` as a unit quaternion `[w, x, y, z]`.
+    pub rotation: [f64; 4],
+    /// Translation of `camera_from_world`.
+    pub translation: [f64; 3],
+    pub focal_px: f64,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// A branch drawn by the user: where the stroke was drawn decides how it gets depth.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "in", rename_all = "snake_case")]
+pub enum BranchStroke {
+    /// Pixels in a photo (COLMAP convention).
+    Image {
+        image_id: ImageId,
+        stroke: Vec<[f64; 2]>,
+    },
+    /// Pixels in the 3D panel's view.
+    View {
+        camera: ViewCamera,
+        stroke: Vec<[f64; 2]>,
+    },
+    /// Positions in the world frame (a 3D pen, a script).
+    World { points: Vec<[f64; 3]> },
+}
+
+/// Where a dragged control point goes.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "in", rename_all = "snake_case")]
+pub enum BranchTarget {
+    /// A pixel of a photo; the control point keeps its depth in that view.
+    Image { at: PixelRef },
+    /// A pixel of the 3D panel's view; the control point keeps its depth in that view.
+    View { camera: ViewCamera, pixel: [f64; 2] },
+    /// A position in the world frame.
+    World { position: [f64; 3] },
+}
+
+/// An end of a branch.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BranchEnd {
+    Start,
+    End,
+}
+
 /// An edit. Clicks pick the point projecting nearest to the pixel (among points seen in that
 /// view) and act on its segment.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -40,6 +91,33 @@ pub enum Command {
     MarkLeaf { at: PixelRef },
     /// Return the segment's points to their automatic segments and labels.
     ResetSegment { at: PixelRef },
+    /// Replace the branches by the automatic skeleton of the current non-leaf points.
+    AutomaticSkeleton,
+    /// A new branch from a point on an existing one (the first branch of an empty tree is
+    /// the main stem), traced by the points under the stroke (seed 004 §7).
+    DrawBranch {
+        stroke: BranchStroke,
+        /// Radii at the start and the end; default from the parent's radius there.
+        #[serde(default)]
+        radius: Option<[f64; 2]>,
+    },
+    /// Drag a control point of a branch. Moving a child's first control point slides its
+    /// attachment along the parent; children follow their parent.
+    MoveBranch {
+        branch: u32,
+        control_point: usize,
+        to: BranchTarget,
+    },
+    /// Set the radius at one end of a branch (metres, in the model's units).
+    SetRadius {
+        branch: u32,
+        end: BranchEnd,
+        radius: f64,
+    },
+    /// Grow (or remove) a synthesized leaf at the branch's tip.
+    SetLeafAtTip { branch: u32, enabled: bool },
+    /// Delete a branch and everything growing from it.
+    DeleteBranch { branch: u32 },
 }
 
 fn default_non_leaf() -> SegmentLabel {
@@ -66,6 +144,25 @@ impl Command {
             Command::MarkNonLeaf { label, .. } => format!("mark as {label:?}").to_lowercase(),
             Command::MarkLeaf { .. } => "mark as leaf".into(),
             Command::ResetSegment { .. } => "reset segment".into(),
+            Command::AutomaticSkeleton => "automatic skeleton".into(),
+            Command::DrawBranch { stroke, .. } => match stroke {
+                BranchStroke::Image { image_id, .. } => format!("draw branch (view {image_id})"),
+                BranchStroke::View { .. } => "draw branch (3D view)".into(),
+                BranchStroke::World { .. } => "draw branch (3D points)".into(),
+            },
+            Command::MoveBranch {
+                branch,
+                control_point,
+                ..
+            } => format!("move control point {control_point} of branch {branch}"),
+            Command::SetRadius { branch, end, .. } => {
+                format!("set {end:?} radius of branch {branch}").to_lowercase()
+            }
+            Command::SetLeafAtTip { branch, enabled } => format!(
+                "{} leaf at the tip of branch {branch}",
+                if *enabled { "add" } else { "remove" }
+            ),
+            Command::DeleteBranch { branch } => format!("delete branch {branch}"),
         }
     }
 }
@@ -89,6 +186,37 @@ mod tests {
                 },
                 label: SegmentLabel::Stem,
             },
+            Command::AutomaticSkeleton,
+            Command::DrawBranch {
+                stroke: BranchStroke::View {
+                    camera: ViewCamera {
+                        rotation: [1.0, 0.0, 0.0, 0.0],
+                        translation: [0.0, 0.0, 2.0],
+                        focal_px: 500.0,
+                        width: 640,
+                        height: 480,
+                    },
+                    stroke: vec![[1.0, 2.0], [30.0, 40.0]],
+                },
+                radius: Some([0.01, 0.005]),
+            },
+            Command::MoveBranch {
+                branch: 2,
+                control_point: 1,
+                to: BranchTarget::World {
+                    position: [0.1, 0.2, 0.3],
+                },
+            },
+            Command::SetRadius {
+                branch: 0,
+                end: BranchEnd::End,
+                radius: 0.002,
+            },
+            Command::SetLeafAtTip {
+                branch: 1,
+                enabled: true,
+            },
+            Command::DeleteBranch { branch: 4 },
         ];
         let text = serde_json::to_string(&commands).unwrap();
         assert!(text.contains("\"command\":\"split_by_stroke\""), "{text}");

@@ -7,11 +7,12 @@
 //! ([`project`]) stores the input's location and the command history; reopening it replays
 //! the history and yields the same state.
 
+pub mod branches;
 pub mod command;
 pub mod project;
 pub mod session;
 pub mod stroke;
 
-pub use command::{Command, PixelRef};
+pub use command::{BranchEnd, BranchStroke, BranchTarget, Command, PixelRef, ViewCamera};
 pub use project::{Project, ProjectError, open_project, save_session};
 pub use session::{EditError, SegmentState, Session};

@@ -7,8 +7,11 @@ use std::sync::{Arc, Mutex};
 use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
 
-use super::command::{Command, PixelRef};
+use super::branches::{self, BranchEditError, SnapPoints, StrokeView};
+use super::command::{BranchStroke, BranchTarget, Command, PixelRef};
 use super::stroke::{Side, Stroke};
+use crate::branch::skeleton::SkeletonStats;
+use crate::branch::{BranchPoint, BranchTree};
 use crate::graph::maxflow::{MaxFlow, MaxFlowError, Segment as CutSide};
 use crate::graph::pipeline::{SegmentLabel, Segmentation};
 use crate::scene::{ImageId, Scene};
@@ -55,6 +58,18 @@ pub enum EditError {
     MaxFlow(#[from] MaxFlowError),
     #[error(transparent)]
     Boundary(#[from] BoundaryError),
+    #[error(transparent)]
+    Branch(#[from] BranchEditError),
+}
+
+/// How the session's first branch tree (the automatic skeleton of the automatic labels) came
+/// out.
+#[derive(Clone, Debug, Serialize)]
+pub struct InitialSkeleton {
+    pub stats: Option<SkeletonStats>,
+    /// Why there is none, when there is none.
+    pub error: Option<String>,
+    pub seconds: f64,
 }
 
 /// Everything an applied command changed, to undo and redo it exactly.
@@ -68,6 +83,8 @@ struct Change {
     added_edges: Vec<(u32, u32)>,
     /// Graph edges newly cut by the stroke.
     cut_edges: Vec<usize>,
+    /// The branch tree before and after, for branch commands.
+    branches: Option<Box<(BranchTree, BranchTree)>>,
 }
 
 struct Applied {
@@ -101,10 +118,13 @@ pub struct Session {
     oversegmentations: Mutex<HashMap<usize, Arc<Oversegmentation>>>,
     boundaries: HashMap<(u32, usize), Boundary>,
     boundary_options: BoundaryOptions,
+    branches: BranchTree,
+    initial_skeleton: InitialSkeleton,
 }
 
 impl Session {
-    /// Starts a session on an automatic segmentation of `scene`.
+    /// Starts a session on an automatic segmentation of `scene`, with the automatic skeleton
+    /// of its non-leaf points as the first branch tree (empty when there is none).
     pub fn new(scene: Scene, segmentation: Segmentation) -> Self {
         let n = segmentation.points.len();
         let mut node_of = vec![None; n];
@@ -131,7 +151,7 @@ impl Session {
                 })
             })
             .collect();
-        Self {
+        let mut session = Self {
             scene,
             segmentation,
             node_of,
@@ -146,7 +166,138 @@ impl Session {
             oversegmentations: Mutex::new(HashMap::new()),
             boundaries: HashMap::new(),
             boundary_options: BoundaryOptions::default(),
+            branches: BranchTree::default(),
+            initial_skeleton: InitialSkeleton {
+                stats: None,
+                error: None,
+                seconds: 0.0,
+            },
+        };
+        let clock = std::time::Instant::now();
+        match crate::branch::plant::session_skeleton(&session, &Default::default()) {
+            Ok((tree, stats)) => {
+                session.branches = tree;
+                session.initial_skeleton.stats = Some(stats);
+            }
+            Err(e) => {
+                tracing::info!("no automatic skeleton: {e}");
+                session.initial_skeleton.error = Some(e.to_string());
+            }
         }
+        session.initial_skeleton.seconds = clock.elapsed().as_secs_f64();
+        session
+    }
+
+    /// The branch tree.
+    pub fn branches(&self) -> &BranchTree {
+        &self.branches
+    }
+
+    /// How the first branch tree came out.
+    pub fn initial_skeleton(&self) -> &InitialSkeleton {
+        &self.initial_skeleton
+    }
+
+    /// The camera of a photo, for strokes drawn in it.
+    pub fn stroke_view(&self, image_id: ImageId) -> Result<StrokeView, EditError> {
+        let view = self.view_index(image_id)?;
+        let image = &self.scene.reconstruction.images()[view];
+        Ok(StrokeView {
+            camera: self.scene.reconstruction.camera_of(image).clone(),
+            camera_from_world: image.camera_from_world,
+        })
+    }
+
+    /// The branch under a click in a photo.
+    pub fn pick_branch(&self, at: &PixelRef) -> Result<BranchPoint, EditError> {
+        let view = self.stroke_view(at.image_id)?;
+        let pixel = Point2::new(at.pixel[0], at.pixel[1]);
+        branches::pick_branch(&self.branches, &view, &pixel, PICK_TOLERANCE_PX).ok_or(
+            EditError::NothingUnderClick {
+                image_id: at.image_id,
+                x: pixel.x,
+                y: pixel.y,
+                tolerance: PICK_TOLERANCE_PX,
+            },
+        )
+    }
+
+    /// What branch strokes snap to: non-leaf plant points; in a photo, those it sees.
+    fn snap_points(&self, view: Option<usize>) -> SnapPoints<'_> {
+        let points = &self.segmentation.points;
+        let mut candidates = crate::branch::plant::skeleton_point_indices(self);
+        if let Some(view) = view {
+            candidates.retain(|&p| {
+                points.views[p as usize]
+                    .binary_search(&(view as u32))
+                    .is_ok()
+            });
+        }
+        SnapPoints {
+            positions: &points.positions,
+            candidates,
+            spacing: self.segmentation.sigma_3d.max(1e-9),
+        }
+    }
+
+    /// The edited branch tree for a branch command (`None` for other commands).
+    fn plan_branches(&self, command: &Command) -> Result<Option<BranchTree>, EditError> {
+        let tree = &self.branches;
+        let edited = match command {
+            Command::AutomaticSkeleton => {
+                crate::branch::plant::session_skeleton(self, &Default::default())
+                    .map_err(BranchEditError::from)?
+                    .0
+            }
+            Command::DrawBranch { stroke, radius } => match stroke {
+                BranchStroke::Image { image_id, stroke } => {
+                    let view = self.stroke_view(*image_id)?;
+                    let snap = self.snap_points(Some(self.view_index(*image_id)?));
+                    branches::draw_in_view(tree, &view, stroke, &snap, *radius)?
+                }
+                BranchStroke::View { camera, stroke } => {
+                    let view = StrokeView::from_view_camera(camera)?;
+                    branches::draw_in_view(tree, &view, stroke, &self.snap_points(None), *radius)?
+                }
+                BranchStroke::World { points } => {
+                    branches::draw_in_world(tree, points, &self.snap_points(None), *radius)?
+                }
+            },
+            Command::MoveBranch {
+                branch,
+                control_point,
+                to,
+            } => {
+                let current = tree
+                    .get(*branch)
+                    .and_then(|b| b.cylinder.skeleton.control_points().get(*control_point))
+                    .copied();
+                let position = match (to, current) {
+                    (BranchTarget::World { position }, _) => nalgebra::Point3::from(*position),
+                    (_, None) => nalgebra::Point3::origin(), // refused by move_control_point
+                    (BranchTarget::Image { at }, Some(current)) => {
+                        self.stroke_view(at.image_id)?
+                            .drag(&current, &Point2::new(at.pixel[0], at.pixel[1]))?
+                    }
+                    (BranchTarget::View { camera, pixel }, Some(current)) => {
+                        StrokeView::from_view_camera(camera)?
+                            .drag(&current, &Point2::new(pixel[0], pixel[1]))?
+                    }
+                };
+                branches::move_control_point(tree, *branch, *control_point, position)?
+            }
+            Command::SetRadius {
+                branch,
+                end,
+                radius,
+            } => branches::set_radius(tree, *branch, *end, *radius)?,
+            Command::SetLeafAtTip { branch, enabled } => {
+                branches::set_leaf_at_tip(tree, *branch, *enabled)?
+            }
+            Command::DeleteBranch { branch } => branches::delete_branch(tree, *branch)?,
+            _ => return Ok(None),
+        };
+        Ok(Some(edited))
     }
 
     pub fn scene(&self) -> &Scene {
@@ -329,6 +480,9 @@ impl Session {
         self.segments = change.segments_after.clone();
         self.added_edges.extend_from_slice(&change.added_edges);
         self.cut_edges.extend(change.cut_edges.iter().copied());
+        if let Some(trees) = &change.branches {
+            self.branches = trees.1.clone();
+        }
     }
 
     fn backward(&mut self, change: &Change) {
@@ -342,6 +496,9 @@ impl Session {
         for edge in &change.cut_edges {
             self.cut_edges.remove(edge);
         }
+        if let Some(trees) = &change.branches {
+            self.branches = trees.0.clone();
+        }
     }
 
     /// Computes what a command would change, without changing anything.
@@ -351,6 +508,10 @@ impl Session {
             segments_after: self.segments.clone(),
             ..Change::default()
         };
+        if let Some(edited) = self.plan_branches(command)? {
+            change.branches = Some(Box::new((self.branches.clone(), edited)));
+            return Ok(change);
+        }
         match command {
             Command::ConfirmSegment { at } => {
                 let segment = self.pick_segment(at)?;
@@ -425,6 +586,12 @@ impl Session {
             } => {
                 self.plan_split(*image_id, stroke, *closed, &mut change)?;
             }
+            Command::AutomaticSkeleton
+            | Command::DrawBranch { .. }
+            | Command::MoveBranch { .. }
+            | Command::SetRadius { .. }
+            | Command::SetLeafAtTip { .. }
+            | Command::DeleteBranch { .. } => {} // planned above by plan_branches
         }
         Ok(change)
     }

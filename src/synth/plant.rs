@@ -169,6 +169,7 @@ impl Builder {
             parent,
             parent_fraction,
             cylinder: GeneralizedCylinder::new(skeleton, radius_start, radius_end),
+            leaf_at_tip: false,
         });
         id
     }
