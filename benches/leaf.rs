@@ -104,6 +104,7 @@ fn cases(preset: Preset, count: usize) -> Cases {
         plant: PlantContext {
             up: Vector3::z(),
             axis_point: Point3::new(0.0, 0.0, 0.2),
+            support: Vec::new(),
         },
         leaves,
     }

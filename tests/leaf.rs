@@ -102,6 +102,15 @@ fn reconstruct_writes_every_output_and_a_report() {
     assert!(report["segmentation"]["timings"]["total"].as_f64().unwrap() > 0.0);
     assert!(report["unusable_views"].as_array().unwrap().is_empty());
     assert!(report["parameters"]["leaves"]["fit"]["icp_tolerance"].is_number());
+    // Every fitted leaf either touches a branch or gets a petiole to one.
+    assert_eq!(
+        counts["petioles"].as_u64().unwrap() + counts["leaves_touching_branches"].as_u64().unwrap(),
+        fitted,
+        "{counts}"
+    );
+    for petiole in report["attachment"]["petioles"].as_array().unwrap() {
+        assert!(petiole["length"].as_f64().unwrap() > 0.0, "{petiole}");
+    }
     // The OBJ's faces index existing vertices and use the atlas material.
     let obj = std::fs::read_to_string(out.join("plant.obj")).unwrap();
     let vertices = obj.lines().filter(|l| l.starts_with("v ")).count();
@@ -168,7 +177,14 @@ fn exported_glb_passes_the_khronos_validator_and_a_python_reader() {
         .map(|n| n.as_str().unwrap())
         .collect();
     assert!(nodes.iter().any(|n| n.starts_with("leaf_")));
-    assert!(nodes.iter().any(|n| n.starts_with("branch_")));
+    // The skeleton's branches and the petioles.
+    let report = read_json(&reconstruction().join("report.json"));
+    let branches = report["counts"]["branches"].as_u64().unwrap()
+        + report["counts"]["petioles"].as_u64().unwrap();
+    assert_eq!(
+        nodes.iter().filter(|n| n.starts_with("branch_")).count() as u64,
+        branches
+    );
     assert!(
         nodes
             .iter()

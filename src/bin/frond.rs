@@ -466,16 +466,12 @@ fn reconstruct(
     let leaves = frond::leaf::reconstruct_leaves(&mut session, &options, &progress)
         .context("reconstructing leaves")?;
     progress.bar.finish_and_clear();
-    let clock = std::time::Instant::now();
-    let (branches, skeleton_stats) =
-        match frond::branch::plant::session_skeleton(&session, &Default::default()) {
-            Ok((tree, stats)) => (tree, Some(stats)),
-            Err(e) => {
-                tracing::warn!("no automatic skeleton: {e}");
-                (frond::branch::BranchTree::default(), None)
-            }
-        };
-    let skeleton_seconds = clock.elapsed().as_secs_f64();
+    // The session's branches: the automatic skeleton, computed when the session started.
+    let branches = session.branches().clone();
+    let initial_skeleton = session.initial_skeleton().clone();
+    if let Some(error) = &initial_skeleton.error {
+        tracing::warn!("no automatic skeleton: {error}");
+    }
     let skeleton_path = out.join("skeleton.json");
     frond::util::atomic::write_atomic(
         &skeleton_path,
@@ -483,6 +479,45 @@ fn reconstruct(
             .as_bytes(),
     )
     .with_context(|| format!("writing {}", skeleton_path.display()))?;
+    let clock = std::time::Instant::now();
+    let small_segments: Vec<(u32, Vec<nalgebra::Point3<f64>>)> = leaves
+        .skipped
+        .iter()
+        .filter(|s| s.for_branch_stage)
+        .map(|s| {
+            let positions = &session.segmentation().points.positions;
+            let members = session.members(s.segment);
+            (
+                s.segment,
+                members.iter().map(|&p| positions[p as usize]).collect(),
+            )
+        })
+        .collect();
+    let attachment = frond::branch::attach::attach_leaves(
+        &branches,
+        &leaves,
+        &small_segments,
+        &session.segmentation().foreground.up,
+    );
+    let attach_seconds = clock.elapsed().as_secs_f64();
+    // Tip leaves are numbered after every segment id.
+    let tip_leaf_base = session.segments().len() as u32;
+    let mut model_branches = frond::branch::plant::model_branches(&branches);
+    let petiole_tree = frond::branch::BranchTree {
+        branches: attachment
+            .petioles
+            .iter()
+            .enumerate()
+            .map(|(k, p)| frond::branch::Branch {
+                id: branches.next_id() + k as u32,
+                parent: Some(p.branch),
+                parent_fraction: p.parent_fraction,
+                cylinder: p.cylinder.clone(),
+                leaf_at_tip: false,
+            })
+            .collect(),
+    };
+    model_branches.extend(frond::branch::plant::model_branches(&petiole_tree));
     let model = frond::model::PlantModel {
         leaves: leaves
             .leaves
@@ -492,8 +527,16 @@ fn reconstruct(
                 mesh: l.fit.mesh.clone(),
                 texture: l.fit.texture.clone(),
             })
+            .chain(attachment.posed.iter().map(|p| frond::model::ModelLeaf {
+                id: match p.kind {
+                    frond::branch::attach::PosedKind::SmallSegment => p.source,
+                    frond::branch::attach::PosedKind::BranchTip => tip_leaf_base + p.source,
+                },
+                mesh: p.mesh.clone(),
+                texture: p.texture.clone(),
+            }))
             .collect(),
-        branches: frond::branch::plant::model_branches(&branches),
+        branches: model_branches,
     };
     let clock = std::time::Instant::now();
     let export = model
@@ -518,7 +561,7 @@ fn reconstruct(
     let report = serde_json::json!({
         "frond": env!("CARGO_PKG_VERSION"),
         "input": input,
-        "stages": ["foreground", "segmentation", "boundaries", "leaves", "skeleton", "export"],
+        "stages": ["foreground", "segmentation", "skeleton", "boundaries", "leaves", "attachment", "export"],
         "counts": {
             "points": session.segmentation().points.len(),
             "foreground": class_counts,
@@ -526,10 +569,14 @@ fn reconstruct(
             "leaves_fitted": leaves.leaves.len(),
             "leaves_skipped": leaves.skipped.len(),
             "branches": branches.branches.len(),
+            "petioles": attachment.petioles.len(),
+            "leaves_touching_branches": attachment.touching,
+            "leaves_posed": attachment.posed.len(),
             "triangles": export.triangles,
             "atlas_pages": export.atlas_pages,
         },
-        "skeleton": skeleton_stats,
+        "skeleton": initial_skeleton.stats,
+        "attachment": attachment,
         "template": leaves.template_source.map(|t| serde_json::json!({
             "segment": t.segment,
             "image_id": session.scene().reconstruction.images()[t.view].id,
@@ -542,6 +589,8 @@ fn reconstruct(
             "points": l.fit.points,
             "point_residual": l.fit.point_residual,
             "length": l.fit.length,
+            "base": l.fit.base,
+            "tip": l.fit.tip,
             "area": l.fit.area,
             "icp": l.fit.icp,
             "boundary_area": l.fit.boundary_area,
@@ -553,7 +602,8 @@ fn reconstruct(
         "segmentation": segmentation_summary,
         "timings": {
             "leaves": leaves.timings,
-            "skeleton": skeleton_seconds,
+            "skeleton": initial_skeleton.seconds,
+            "attachment": attach_seconds,
             "export": export_seconds,
             "total": started.elapsed().as_secs_f64(),
         },

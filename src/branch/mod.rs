@@ -5,6 +5,7 @@
 //! Meshing uses rotation-minimising frames (double reflection, Wang et al. 2008), so tubes do
 //! not twist or flip along curved skeletons.
 
+pub mod attach;
 pub mod plant;
 pub mod skeleton;
 pub mod spline;

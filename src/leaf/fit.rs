@@ -75,12 +75,30 @@ impl LeafFrame {
     }
 }
 
-/// Where the plant is, for the orientation heuristic.
+/// Where the plant is, for the orientation of leaves: they face up and away from what they
+/// grow from, base toward it.
 #[derive(Clone, Debug)]
 pub struct PlantContext {
     pub up: Vector3<f64>,
     /// A point on the plant's vertical axis.
     pub axis_point: Point3<f64>,
+    /// Branch tips (empty before there are any: the vertical axis then stands in for them).
+    pub support: Vec<Point3<f64>>,
+}
+
+impl PlantContext {
+    /// The nearest branch tip to `p`, if there are branches.
+    pub fn nearest_branch_point(&self, p: &Point3<f64>) -> Option<Point3<f64>> {
+        self.support
+            .iter()
+            .min_by(|a, b| (*a - p).norm_squared().total_cmp(&(*b - p).norm_squared()))
+            .copied()
+    }
+
+    /// The point on the plant's axis at p's height.
+    pub fn axis_point_near(&self, p: &Point3<f64>) -> Point3<f64> {
+        self.axis_point + self.up * self.up.dot(&(p - self.axis_point))
+    }
 }
 
 /// A segment's image boundary in a view, for the boundary warp and the texture.
@@ -399,6 +417,9 @@ pub struct FittedLeaf {
     pub outline_area: f64,
     /// Length of the leaf along its midrib in the plane (metres).
     pub length: f64,
+    /// Where the midrib starts (meets the petiole) and ends, world frame.
+    pub base: [f64; 3],
+    pub tip: [f64; 3],
     pub area: f64,
     /// Share of texels taken from the photo (the rest inherit the generic texture).
     pub textured_fraction: f64,
@@ -496,8 +517,9 @@ fn sample_rgb(image: &image::RgbImage, pixel: &Point2<f64>) -> Option<[u8; 3]> {
     Some(out.map(|v| v.round().clamp(0.0, 255.0) as u8))
 }
 
-/// The frame of a point group: PCA axes, normal facing up and away from the plant's axis, x
-/// from the end nearer the plant's axis (the base, where a leaf meets its stem) to the other.
+/// The frame of a point group: PCA axes, normal facing up and away from what the leaf grows
+/// from (a branch ending near one of its ends, else the plant's axis), x from the end nearer it (the
+/// base, where a leaf meets its petiole or stem) to the other.
 pub fn leaf_frame(
     points: &[Point3<f64>],
     plant: &PlantContext,
@@ -511,28 +533,44 @@ pub fn leaf_frame(
     {
         return Err(FitError::Degenerate);
     }
-    let horizontal = |p: &Point3<f64>| {
-        let d = p - plant.axis_point;
-        d - plant.up * plant.up.dot(&d)
-    };
-    let outward = horizontal(&shape.centroid)
-        .try_normalize(1e-9)
-        .unwrap_or_else(Vector3::zeros);
-    let mut normal = shape.normal();
-    if normal.dot(&(plant.up + outward)) < 0.0 {
-        normal = -normal;
-    }
     let mut x_axis = shape.axes[0];
-    // The base is the end nearer the plant's axis.
     let mut along: Vec<f64> = points
         .iter()
         .map(|p| (p - shape.centroid).dot(&x_axis))
         .collect();
     let lo = percentile(&mut along, 0.02);
     let hi = percentile(&mut along, 0.98);
-    let end_lo = shape.centroid + x_axis * lo;
-    let end_hi = shape.centroid + x_axis * hi;
-    if horizontal(&end_hi).norm() < horizontal(&end_lo).norm() {
+    let ends = [shape.centroid + x_axis * lo, shape.centroid + x_axis * hi];
+    // What the leaf grows from: a branch ending within a quarter of the leaf's length of one
+    // of its ends (its petiole); else the plant's axis (the skeleton may miss the leaf's
+    // branch, and a branch merely passing by is often another leaf's).
+    let branch_at_end = ends
+        .iter()
+        .filter_map(|end| {
+            plant
+                .nearest_branch_point(end)
+                .map(|b| ((b - end).norm(), b))
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .filter(|(distance, _)| *distance <= 0.25 * (hi - lo));
+    let distance_to_support = |p: &Point3<f64>| match branch_at_end {
+        Some((_, branch_point)) => (p - branch_point).norm(),
+        None => {
+            let d = p - plant.axis_point_near(p);
+            (d - plant.up * plant.up.dot(&d)).norm()
+        }
+    };
+    let support = branch_at_end.map_or_else(|| plant.axis_point_near(&shape.centroid), |b| b.1);
+    let away = shape.centroid - support;
+    let outward = (away - plant.up * plant.up.dot(&away))
+        .try_normalize(1e-9)
+        .unwrap_or_else(Vector3::zeros);
+    let mut normal = shape.normal();
+    if normal.dot(&(plant.up + outward)) < 0.0 {
+        normal = -normal;
+    }
+    // The base is the end nearer the support.
+    if distance_to_support(&ends[1]) < distance_to_support(&ends[0]) {
         x_axis = -x_axis;
     }
     let y_axis = normal.cross(&x_axis).normalize();
@@ -716,6 +754,16 @@ pub fn fit_leaf(
             .map(|p| affine.apply(p))
             .collect::<Vec<_>>(),
     );
+    let on_surface = |template_point: Point2<f64>| {
+        let q = affine.apply(&template_point);
+        let p = frame.to_world(&q, heights.at(&q));
+        [p.x, p.y, p.z]
+    };
+    let base = on_surface(Point2::new(0.0, template.midrib[0].y));
+    let tip = on_surface(Point2::new(
+        1.0,
+        template.midrib[template.midrib.len() - 1].y,
+    ));
     Ok(FittedLeaf {
         frame,
         affine,
@@ -728,6 +776,8 @@ pub fn fit_leaf(
         boundary_area,
         outline_area,
         length,
+        base,
+        tip,
         area,
         textured_fraction: from_photo as f64 / (size * size) as f64,
         notes,
@@ -813,6 +863,7 @@ mod tests {
         let plant = PlantContext {
             up: Vector3::z(),
             axis_point: Point3::origin(),
+            support: Vec::new(),
         };
         let (frame, _) = leaf_frame(&points, &plant).unwrap();
         assert!(frame.normal.z > 0.99);
@@ -860,6 +911,7 @@ mod tests {
         PlantContext {
             up: Vector3::z(),
             axis_point: Point3::origin(),
+            support: Vec::new(),
         }
     }
 

@@ -119,16 +119,22 @@ fn load_photo(session: &Session, view: usize) -> Option<image::RgbImage> {
     }))
 }
 
-/// The plant's up direction and axis from the automatic segmentation.
+/// The plant's up direction and axis from the automatic segmentation, and the tips of the
+/// session's branches.
 pub fn plant_context(session: &Session) -> PlantContext {
     let foreground = &session.segmentation().foreground;
     PlantContext {
         up: foreground.up,
         axis_point: foreground.plant_center,
+        support: session
+            .branches()
+            .branches
+            .iter()
+            .map(|b| b.cylinder.skeleton.point_at_fraction(1.0))
+            .collect(),
     }
 }
 
-/// The points of a segment.
 fn segment_points(session: &Session, segment: u32) -> Vec<Point3<f64>> {
     let points = &session.segmentation().points;
     session

@@ -1,0 +1,391 @@
+//! Leaves meet branches (seed 004 §7–8): each reconstructed leaf is joined to its nearest
+//! branch by a petiole, leaf segments too small to fit (fewer than 3 points) are posed as the
+//! average leaf from their nearest branch, and branches marked "leaf at tip" grow the average
+//! leaf scaled by their thickness.
+
+use nalgebra::{Point2, Point3, Vector3};
+use serde::Serialize;
+
+use super::{BranchTree, GeneralizedCylinder, Spline};
+use crate::leaf::fit::{Affine2, LeafFrame};
+use crate::leaf::{LeafReconstruction, LeafTemplate};
+use crate::mesh::TriMesh;
+
+/// A leaf base within this many radii of its branch's surface needs no petiole.
+const TOUCHING_RADII: f64 = 2.0;
+/// Petiole radius at the branch, as a share of the branch's radius there, at most this share
+/// of the leaf's length.
+const PETIOLE_RADIUS_SHARE: f64 = 0.6;
+const PETIOLE_RADIUS_PER_LENGTH: f64 = 0.03;
+
+/// A petiole joining a leaf's base to a branch.
+#[derive(Clone, Debug, Serialize)]
+pub struct Petiole {
+    /// The leaf (segment id).
+    pub leaf: u32,
+    pub branch: u32,
+    pub parent_fraction: f64,
+    #[serde(skip)]
+    pub cylinder: GeneralizedCylinder,
+    pub length: f64,
+}
+
+/// Why a synthesized leaf is there.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PosedKind {
+    /// A leaf segment with too few points to fit.
+    SmallSegment,
+    /// A branch marked "leaf at tip".
+    BranchTip,
+}
+
+/// The average leaf placed by the branch structure.
+#[derive(Clone, Debug, Serialize)]
+pub struct PosedLeaf {
+    pub kind: PosedKind,
+    /// The segment (small segments) or the branch (tips).
+    pub source: u32,
+    pub branch: u32,
+    pub base: [f64; 3],
+    pub tip: [f64; 3],
+    pub length: f64,
+    #[serde(skip)]
+    pub mesh: TriMesh,
+    #[serde(skip)]
+    pub texture: image::RgbaImage,
+}
+
+/// The average reconstructed leaf: median length and width-to-length ratio of the fits.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct AverageLeaf {
+    pub length: f64,
+    /// Width scale over length scale of the template→leaf map.
+    pub aspect: f64,
+    /// Median radius of the branches where leaves attach (for scaling tip leaves).
+    pub attachment_radius: Option<f64>,
+}
+
+/// What attaching leaves produced.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Attachment {
+    pub petioles: Vec<Petiole>,
+    pub posed: Vec<PosedLeaf>,
+    pub average: Option<AverageLeaf>,
+    /// Leaves whose base already touches a branch.
+    pub touching: usize,
+}
+
+fn median(mut values: Vec<f64>) -> Option<f64> {
+    values.retain(|v| v.is_finite());
+    values.sort_by(f64::total_cmp);
+    values.get(values.len() / 2).copied()
+}
+
+/// The template laid flat in a frame with its base at the origin, scaled to `length` and
+/// `aspect`, as a mesh with the template's texture.
+fn average_leaf_mesh(
+    template: &LeafTemplate,
+    base: &Point3<f64>,
+    direction: &Vector3<f64>,
+    up: &Vector3<f64>,
+    length: f64,
+    aspect: f64,
+) -> Option<(TriMesh, Point3<f64>)> {
+    let x_axis = direction.try_normalize(1e-12)?;
+    let y_axis = up
+        .cross(&x_axis)
+        .try_normalize(1e-9)
+        .unwrap_or_else(|| super::any_perpendicular(&x_axis));
+    let normal = x_axis.cross(&y_axis);
+    let frame = LeafFrame {
+        origin: *base,
+        x_axis,
+        y_axis,
+        normal,
+    };
+    let base_y = template.midrib[0].y;
+    let affine = Affine2 {
+        matrix: nalgebra::Matrix2::new(length, 0.0, 0.0, length * aspect),
+        translation: nalgebra::Vector2::new(0.0, -length * aspect * base_y),
+    };
+    let (mut mesh, flat) = template.mesh(12, 7);
+    for (vertex, p) in mesh.positions.iter_mut().zip(&flat) {
+        *vertex = frame.to_world(&affine.apply(p), 0.0).cast::<f32>();
+    }
+    mesh.compute_normals();
+    let tip_y = template.midrib[template.midrib.len() - 1].y;
+    let tip = frame.to_world(&affine.apply(&Point2::new(1.0, tip_y)), 0.0);
+    Some((mesh, tip))
+}
+
+/// Joins leaves to branches (see the module docs). `small_segments` are the leaf segments
+/// the leaf stage left for the branch stage, with their points; `up` is the plant's up.
+pub fn attach_leaves(
+    tree: &BranchTree,
+    leaves: &LeafReconstruction,
+    small_segments: &[(u32, Vec<Point3<f64>>)],
+    up: &Vector3<f64>,
+) -> Attachment {
+    let mut attachment = Attachment::default();
+    if tree.branches.is_empty() {
+        return attachment;
+    }
+    let mut attachment_radii = Vec::new();
+    for leaf in &leaves.leaves {
+        let base = Point3::from(leaf.fit.base);
+        let Some(anchor) = tree.closest(&base) else {
+            continue;
+        };
+        attachment_radii.push(anchor.radius);
+        if anchor.distance <= TOUCHING_RADII * anchor.radius.max(1e-9) {
+            attachment.touching += 1;
+            continue;
+        }
+        let radius_start = (PETIOLE_RADIUS_SHARE * anchor.radius)
+            .min(PETIOLE_RADIUS_PER_LENGTH * leaf.fit.length)
+            .max(1e-6);
+        let Ok(skeleton) = Spline::new(vec![anchor.position, base]) else {
+            continue;
+        };
+        let cylinder = GeneralizedCylinder::new(skeleton, radius_start, 0.75 * radius_start);
+        attachment.petioles.push(Petiole {
+            leaf: leaf.segment,
+            branch: anchor.branch,
+            parent_fraction: anchor.fraction,
+            length: cylinder.length(),
+            cylinder,
+        });
+    }
+    let lengths: Vec<f64> = leaves.leaves.iter().map(|l| l.fit.length).collect();
+    let aspects: Vec<f64> = leaves
+        .leaves
+        .iter()
+        .map(|l| {
+            let m = &l.fit.affine.matrix;
+            m.column(1).norm() / m.column(0).norm().max(1e-12)
+        })
+        .collect();
+    let (Some(length), Some(aspect)) = (median(lengths), median(aspects)) else {
+        return attachment;
+    };
+    let average = AverageLeaf {
+        length,
+        aspect,
+        attachment_radius: median(attachment_radii),
+    };
+    attachment.average = Some(average);
+
+    // Small segments: the average leaf from the nearest branch toward the points.
+    for (segment, points) in small_segments {
+        if points.is_empty() {
+            continue;
+        }
+        let centroid = Point3::from(
+            points.iter().map(|p| p.coords).sum::<Vector3<f64>>() / points.len() as f64,
+        );
+        if !centroid.iter().all(|c| c.is_finite()) {
+            continue;
+        }
+        let Some(anchor) = tree.closest(&centroid) else {
+            continue;
+        };
+        let toward = centroid - anchor.position;
+        let direction = if toward.norm() > 1e-9 {
+            toward
+        } else {
+            // On the branch: straight out, perpendicular to it.
+            up.cross(&anchor.tangent)
+        };
+        let Some(direction) = direction.try_normalize(1e-12) else {
+            continue;
+        };
+        let base = anchor.position + direction * anchor.radius;
+        if let Some((mesh, tip)) =
+            average_leaf_mesh(&leaves.template, &base, &direction, up, length, aspect)
+        {
+            attachment.posed.push(PosedLeaf {
+                kind: PosedKind::SmallSegment,
+                source: *segment,
+                branch: anchor.branch,
+                base: base.into(),
+                tip: tip.into(),
+                length,
+                mesh,
+                texture: leaves.template.texture.clone(),
+            });
+        }
+    }
+
+    // Tips: the average leaf scaled by the branch's thickness, along the branch's direction.
+    for branch in tree.branches.iter().filter(|b| b.leaf_at_tip) {
+        let Some(tip_point) = tree.point_on(branch.id, 1.0) else {
+            continue;
+        };
+        let scale = average
+            .attachment_radius
+            .filter(|r| *r > 0.0)
+            .map_or(1.0, |r| (tip_point.radius / r).clamp(0.25, 2.0));
+        let leaf_length = length * scale;
+        if let Some((mesh, tip)) = average_leaf_mesh(
+            &leaves.template,
+            &tip_point.position,
+            &tip_point.tangent,
+            up,
+            leaf_length,
+            aspect,
+        ) {
+            attachment.posed.push(PosedLeaf {
+                kind: PosedKind::BranchTip,
+                source: branch.id,
+                branch: branch.id,
+                base: tip_point.position.into(),
+                tip: tip.into(),
+                length: leaf_length,
+                mesh,
+                texture: leaves.template.texture.clone(),
+            });
+        }
+    }
+    attachment
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::branch::Branch;
+    use crate::leaf::fit::{FittedLeaf, HeightField};
+    use crate::leaf::{LeafTimings, ReconstructedLeaf};
+
+    fn template() -> LeafTemplate {
+        let outline: Vec<Point2<f64>> = (0..64)
+            .map(|k| {
+                let t = std::f64::consts::TAU * k as f64 / 64.0;
+                Point2::new(0.5 + 0.5 * t.cos(), 0.2 * t.sin())
+            })
+            .collect();
+        LeafTemplate::from_outline(&outline, LeafTemplate::plain_texture(8)).unwrap()
+    }
+
+    /// A vertical stem 0.5 long, radius 0.01 → 0.005, tip leaf wanted.
+    fn stem() -> BranchTree {
+        BranchTree {
+            branches: vec![Branch {
+                id: 0,
+                parent: None,
+                parent_fraction: 0.0,
+                cylinder: GeneralizedCylinder::new(
+                    Spline::new(vec![Point3::origin(), Point3::new(0.0, 0.0, 0.5)]).unwrap(),
+                    0.01,
+                    0.005,
+                ),
+                leaf_at_tip: true,
+            }],
+        }
+    }
+
+    fn fitted(base: [f64; 3], length: f64) -> FittedLeaf {
+        FittedLeaf {
+            frame: LeafFrame {
+                origin: Point3::from(base),
+                x_axis: Vector3::x(),
+                y_axis: Vector3::y(),
+                normal: Vector3::z(),
+            },
+            affine: Affine2 {
+                matrix: nalgebra::Matrix2::new(length, 0.0, 0.0, 0.5 * length),
+                translation: nalgebra::Vector2::zeros(),
+            },
+            heights: HeightField::flat(),
+            mesh: TriMesh::default(),
+            texture: image::RgbaImage::new(1, 1),
+            points: 100,
+            point_residual: 0.0,
+            icp: None,
+            boundary_area: None,
+            outline_area: 0.0,
+            length,
+            base,
+            tip: [base[0] + length, base[1], base[2]],
+            area: 0.0,
+            textured_fraction: 0.0,
+            notes: Vec::new(),
+        }
+    }
+
+    fn reconstruction(leaves: Vec<FittedLeaf>) -> LeafReconstruction {
+        LeafReconstruction {
+            template_source: None,
+            template: template(),
+            leaves: leaves
+                .into_iter()
+                .enumerate()
+                .map(|(k, fit)| ReconstructedLeaf {
+                    segment: k as u32,
+                    view: None,
+                    fit,
+                })
+                .collect(),
+            skipped: Vec::new(),
+            unusable_views: Vec::new(),
+            timings: LeafTimings::default(),
+        }
+    }
+
+    #[test]
+    fn petioles_join_leaf_bases_to_the_nearest_branch_point() {
+        let leaves = reconstruction(vec![
+            fitted([0.1, 0.0, 0.3], 0.1),
+            // Touching the stem: no petiole.
+            fitted([0.012, 0.0, 0.2], 0.08),
+        ]);
+        let attachment = attach_leaves(&stem(), &leaves, &[], &Vector3::z());
+        assert_eq!(attachment.petioles.len(), 1);
+        assert_eq!(attachment.touching, 1);
+        let petiole = &attachment.petioles[0];
+        assert_eq!((petiole.leaf, petiole.branch), (0, 0));
+        assert!((petiole.parent_fraction - 0.6).abs() < 1e-3);
+        assert!((petiole.length - 0.1).abs() < 1e-3);
+        let ends = petiole.cylinder.skeleton.control_points();
+        assert!((ends[1] - Point3::new(0.1, 0.0, 0.3)).norm() < 1e-12);
+        // min(0.6 × the stem's radius there (0.007), 3 % of the leaf's length).
+        assert!((petiole.cylinder.radius_start - 0.003).abs() < 1e-12);
+    }
+
+    #[test]
+    fn small_segments_and_tips_get_the_average_leaf() {
+        let leaves = reconstruction(vec![
+            fitted([0.1, 0.0, 0.3], 0.1),
+            fitted([0.0, 0.1, 0.2], 0.12),
+            fitted([-0.1, 0.0, 0.25], 0.14),
+        ]);
+        let small = vec![(7, vec![Point3::new(0.0, -0.05, 0.4)])];
+        let attachment = attach_leaves(&stem(), &leaves, &small, &Vector3::z());
+        let average = attachment.average.unwrap();
+        assert!((average.length - 0.12).abs() < 1e-12);
+        assert!((average.aspect - 0.5).abs() < 1e-12);
+        assert_eq!(attachment.posed.len(), 2);
+        let posed = &attachment.posed[0];
+        assert_eq!((posed.kind, posed.source), (PosedKind::SmallSegment, 7));
+        // From the stem toward the point, the average length.
+        let (base, tip) = (Point3::from(posed.base), Point3::from(posed.tip));
+        assert!((base - Point3::new(0.0, -0.01 * 0.2 - 0.005 * 0.8, 0.4)).norm() < 1e-3);
+        assert!(((tip - base).norm() - 0.12).abs() < 1e-6);
+        assert!((tip - base).normalize().dot(&-Vector3::y()) > 0.999);
+        assert!(!posed.mesh.triangles.is_empty());
+        // The tip leaf grows along the stem, scaled by tip radius / attachment radius.
+        let tip_leaf = &attachment.posed[1];
+        assert_eq!(tip_leaf.kind, PosedKind::BranchTip);
+        let expected = 0.12 * (0.005 / average.attachment_radius.unwrap()).clamp(0.25, 2.0);
+        assert!((tip_leaf.length - expected).abs() < 1e-12);
+        assert!((Point3::from(tip_leaf.base) - Point3::new(0.0, 0.0, 0.5)).norm() < 1e-9);
+        assert!(Point3::from(tip_leaf.tip).z > 0.5 + 0.9 * expected);
+    }
+
+    #[test]
+    fn no_branches_no_attachment() {
+        let leaves = reconstruction(vec![fitted([0.1, 0.0, 0.3], 0.1)]);
+        let attachment = attach_leaves(&BranchTree::default(), &leaves, &[], &Vector3::z());
+        assert!(attachment.petioles.is_empty() && attachment.posed.is_empty());
+    }
+}
