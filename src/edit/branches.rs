@@ -9,6 +9,7 @@ use super::command::{BranchEnd, ViewCamera};
 use crate::branch::skeleton::SkeletonError;
 use crate::branch::{Branch, BranchPoint, BranchTree, GeneralizedCylinder, Spline, SplineError};
 use crate::scene::{Camera, CameraModelKind};
+use crate::util::polyline::resample;
 
 /// Stroke samples take the point projecting nearest within this distance (pixels).
 pub const BRANCH_TOLERANCE_PX: f64 = 8.0;
@@ -212,60 +213,7 @@ fn resample_stroke(stroke: &[[f64; 2]]) -> Result<Vec<Point2<f64>>, BranchEditEr
         return Err(BranchEditError::InvalidStroke);
     }
     let count = ((length / STROKE_STEP_PX).ceil() as usize + 1).clamp(2, MAX_STROKE_SAMPLES);
-    Ok(resample_polyline(&points, count))
-}
-
-/// `count` points equally spaced along a polyline (2D or 3D).
-fn resample_polyline<P>(points: &[P], count: usize) -> Vec<P>
-where
-    P: Copy + PolylinePoint,
-{
-    let cumulative: Vec<f64> = std::iter::once(0.0)
-        .chain(points.windows(2).scan(0.0, |total, w| {
-            *total += w[0].distance(&w[1]);
-            Some(*total)
-        }))
-        .collect();
-    let length = cumulative[cumulative.len() - 1];
-    (0..count)
-        .map(|k| {
-            let target = length * k as f64 / (count - 1).max(1) as f64;
-            let i = cumulative
-                .partition_point(|&c| c < target)
-                .clamp(1, points.len() - 1);
-            let span = cumulative[i] - cumulative[i - 1];
-            let t = if span < 1e-15 {
-                0.0
-            } else {
-                ((target - cumulative[i - 1]) / span).clamp(0.0, 1.0)
-            };
-            points[i - 1].lerp(&points[i], t)
-        })
-        .collect()
-}
-
-/// What [`resample_polyline`] needs of a point.
-trait PolylinePoint {
-    fn distance(&self, other: &Self) -> f64;
-    fn lerp(&self, other: &Self, t: f64) -> Self;
-}
-
-impl PolylinePoint for Point2<f64> {
-    fn distance(&self, other: &Self) -> f64 {
-        (other - self).norm()
-    }
-    fn lerp(&self, other: &Self, t: f64) -> Self {
-        self + (other - self) * t
-    }
-}
-
-impl PolylinePoint for Point3<f64> {
-    fn distance(&self, other: &Self) -> f64 {
-        (other - self).norm()
-    }
-    fn lerp(&self, other: &Self, t: f64) -> Self {
-        self + (other - self) * t
-    }
+    Ok(resample(&points, count))
 }
 
 /// Median over a sliding window of 5 (ends shrink the window).
@@ -283,12 +231,12 @@ fn median_filter(values: &[f64]) -> Vec<f64> {
 
 /// DrawBranch in a camera (seed 004 §7): the stroke starts on an existing branch (the first
 /// branch of an empty tree is the main stem); each sample takes the 3D position of the snap
-/// point projecting nearest within [`BRANCH_TOLERANCE_PX`] (front-most among near ties),
-/// moved back along the ray by the expected radius to the centreline; samples with none
-/// inherit their depth from the parent branch: the attachment point's depth, interpolated
-/// toward the next traced sample when there is one.
-/// Depths are median-filtered so that one sample snapping to a farther stem does not kink
-/// the branch.
+/// point projecting nearest within [`BRANCH_TOLERANCE_PX`] whose depth continues the branch
+/// (a gate around the last traced depth, starting from the attachment point, or for a main
+/// stem from the median front-most depth), moved back along the ray by the expected radius to
+/// the centreline; samples with none inherit their depth from the parent branch: the
+/// attachment point's depth, interpolated toward the next traced sample when there is one.
+/// Depths are median-filtered so that one stray sample does not kink the branch.
 pub fn draw_in_view(
     tree: &BranchTree,
     view: &StrokeView,
@@ -340,50 +288,44 @@ pub fn draw_in_view(
             .filter(|(d, _, _)| *d <= BRANCH_TOLERANCE_PX)
             .collect()
     };
-    let front_most = |near: &[(f64, f64, u32)]| {
+    // Among the candidates within FRONT_TIE_PX of the nearest projection, the one whose
+    // depth is closest to `depth` (0: the front-most).
+    let pick = |near: &[(f64, f64, u32)], depth: f64| {
         let nearest = near.iter().map(|c| c.0).fold(f64::INFINITY, f64::min);
         near.iter()
             .filter(|c| c.0 <= nearest + FRONT_TIE_PX)
-            .min_by(|a, b| a.1.total_cmp(&b.1).then(a.2.cmp(&b.2)))
+            .min_by(|a, b| {
+                (a.1 - depth)
+                    .abs()
+                    .total_cmp(&(b.1 - depth).abs())
+                    .then(a.2.cmp(&b.2))
+            })
             .map(|c| (c.1, c.2))
     };
     // A main stem starts from the median depth of the front-most points along the stroke.
     let start_depth = inherited.or_else(|| {
         let mut depths: Vec<f64> = traced
             .iter()
-            .filter_map(|pixel| front_most(&near_sample(pixel)).map(|(d, _)| d))
+            .filter_map(|pixel| pick(&near_sample(pixel), 0.0).map(|(d, _)| d))
             .collect();
         depths.sort_by(f64::total_cmp);
         depths.get(depths.len() / 2).copied()
     });
+    let Some(start_depth) = start_depth else {
+        return Err(BranchEditError::NoDepth);
+    };
     let mut hits: Vec<Option<(f64, u32)>> = Vec::with_capacity(traced.len());
-    let mut last: Option<(usize, f64)> = start_depth.map(|d| (0, d));
+    let mut last = (0, start_depth);
     for (k, pixel) in traced.iter().enumerate() {
+        let (at, depth) = last;
+        let gap = (k + 1 - at) as f64;
+        let step_world = STROKE_STEP_PX * depth / focal;
+        let gate = 3.0 * snap.spacing + radii.0 + 2.0 * gap * step_world;
         let mut near = near_sample(pixel);
-        if let Some((at, depth)) = last {
-            let gap = (k + 1 - at) as f64;
-            let step_world = STROKE_STEP_PX * depth / focal;
-            let gate = 3.0 * snap.spacing + radii.0 + 2.0 * gap * step_world;
-            near.retain(|c| (c.1 - depth).abs() <= gate);
-        }
-        let hit = match last {
-            // Near ties: the depth that continues the branch best.
-            Some((_, depth)) => {
-                let nearest = near.iter().map(|c| c.0).fold(f64::INFINITY, f64::min);
-                near.iter()
-                    .filter(|c| c.0 <= nearest + FRONT_TIE_PX)
-                    .min_by(|a, b| {
-                        (a.1 - depth)
-                            .abs()
-                            .total_cmp(&(b.1 - depth).abs())
-                            .then(a.2.cmp(&b.2))
-                    })
-                    .map(|c| (c.1, c.2))
-            }
-            None => front_most(&near),
-        };
+        near.retain(|c| (c.1 - depth).abs() <= gate);
+        let hit = pick(&near, depth);
         if let Some((depth, _)) = hit {
-            last = Some((k + 1, depth));
+            last = (k + 1, depth);
         }
         hits.push(hit);
     }
@@ -454,7 +396,7 @@ pub fn draw_in_world(
     }
     let length: f64 = points.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
     let step = (2.0 * snap.spacing).max(length / MAX_STROKE_SAMPLES as f64);
-    let samples = resample_polyline(
+    let samples = resample(
         &points,
         ((length / step).ceil() as usize + 1).clamp(2, MAX_STROKE_SAMPLES),
     );
@@ -553,7 +495,7 @@ fn add_branch(
     let length = cumulative[cumulative.len() - 1];
     let count = (polyline.len() / 4 + 2).clamp(2, 8);
     let half_window = 0.5 * length / (count - 1) as f64;
-    let even = resample_polyline(&polyline, count);
+    let even = resample(&polyline, count);
     let mut control_points: Vec<Point3<f64>> = Vec::with_capacity(count);
     for (k, fallback) in even.iter().enumerate() {
         let point = if k == 0 {

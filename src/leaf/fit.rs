@@ -656,7 +656,7 @@ pub fn fit_leaf(
         {
             notes.push("boundary encloses almost no area on the leaf plane: no warp".into());
         } else if projected.len() >= 8 && projected.len() * 10 >= view.polygon.len() * 8 {
-            let dense = super::template::resample(
+            let dense = crate::util::polyline::resample(
                 &{
                     let mut closed = projected.clone();
                     closed.push(projected[0]);

@@ -8,6 +8,7 @@ use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
 
 use crate::mesh::TriMesh;
+use crate::util::polyline::resample;
 
 /// Vertices per polyline (seed 004: "about 10").
 pub const POLYLINE_VERTICES: usize = 11;
@@ -58,35 +59,6 @@ fn y_at(polyline: &[Point2<f64>], x: f64) -> f64 {
         }
     }
     polyline[polyline.len() - 1].y
-}
-
-/// `n` points equally spaced in arc length along a polyline.
-pub fn resample(polyline: &[Point2<f64>], n: usize) -> Vec<Point2<f64>> {
-    if polyline.len() < 2 || n < 2 {
-        return polyline.to_vec();
-    }
-    let lengths: Vec<f64> = polyline.windows(2).map(|w| (w[1] - w[0]).norm()).collect();
-    let total: f64 = lengths.iter().sum();
-    if total <= 0.0 {
-        return vec![polyline[0]; n];
-    }
-    let mut out = Vec::with_capacity(n);
-    let mut segment = 0;
-    let mut walked = 0.0;
-    for k in 0..n {
-        let target = total * k as f64 / (n - 1) as f64;
-        while segment + 1 < lengths.len() && walked + lengths[segment] < target {
-            walked += lengths[segment];
-            segment += 1;
-        }
-        let t = if lengths[segment] > 0.0 {
-            ((target - walked) / lengths[segment]).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        out.push(polyline[segment] + (polyline[segment + 1] - polyline[segment]) * t);
-    }
-    out
 }
 
 impl LeafTemplate {

@@ -3,5 +3,6 @@
 pub mod atomic;
 pub mod id_hash;
 pub mod polygon;
+pub mod polyline;
 pub mod progress;
 pub mod rng;
