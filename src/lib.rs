@@ -4,6 +4,7 @@
 //! as textured meshes, branches as generalized cylinders) comes out. Stages, in data-flow order:
 //!
 //! - [`scene`]: COLMAP models (text and binary, every camera model), images, dense points.
+//! - [`mvs`]: semi-dense multi-view stereo on the CPU (pairwise semi-global matching, fusion).
 //! - [`graph`]: leaf segmentation (kNN graph with 3D/2D weights, threshold partition,
 //!   normalized cuts, foreground separation).
 //! - [`edit`]: the editing session (commands, undo/redo, project files); [`segment`]: image
@@ -22,6 +23,7 @@ pub mod graph;
 pub mod leaf;
 pub mod mesh;
 pub mod model;
+pub mod mvs;
 pub mod render;
 pub mod scene;
 pub mod segment;

@@ -74,6 +74,17 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Semi-dense multi-view stereo on the CPU: pairwise semi-global matching of rectified
+    /// views, multi-view consistency and fusion. Writes a dense workspace (sparse/ with the
+    /// fused points and their tracks, images/, fused.ply, fused.ply.vis, densify.json).
+    Densify {
+        #[command(flatten)]
+        scene: SceneArgs,
+        #[arg(long)]
+        out: PathBuf,
+        #[command(flatten)]
+        params: DensifyArgs,
+    },
     /// Segment the plant's points into leaves (kNN graph, 3D/2D weights, normalized cuts).
     Segment {
         #[command(flatten)]
@@ -115,8 +126,13 @@ enum Command {
         #[arg(long)]
         gt: PathBuf,
         /// The reconstruction's output folder.
-        #[arg(long)]
-        pred: PathBuf,
+        #[arg(long, required_unless_present = "dense")]
+        pred: Option<PathBuf>,
+        /// Score a dense workspace's points instead (`frond densify` output, or any folder
+        /// with fused.ply): points on the plant and their distance to its true surface,
+        /// aligned to the truth by the workspace's cameras.
+        #[arg(long, conflicts_with_all = ["pred", "pred_model"])]
+        dense: Option<PathBuf>,
         /// The COLMAP model the prediction was made from, when it is not the dataset's own
         /// (real COLMAP): the prediction is aligned to the truth by its camera centres.
         #[arg(long)]
@@ -124,6 +140,57 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+}
+
+/// Dense stereo parameters.
+#[derive(Args, Clone, Copy)]
+struct DensifyArgs {
+    /// Longest image side used for matching (larger photos are downsized), pixels.
+    #[arg(long, default_value_t = 1000)]
+    max_image_size: u32,
+    /// Fuse only depths within this many median camera distances of the point the views
+    /// converge on (0: everything).
+    #[arg(long, default_value_t = 1.0)]
+    roi_radius: f64,
+    /// Stereo partners per view (each gives the view one depth map).
+    #[arg(long, default_value_t = 1)]
+    partners: usize,
+    /// Other depth maps that must agree with a depth for it to be kept.
+    #[arg(long, default_value_t = 2)]
+    min_consistent: usize,
+    /// Depths agree when they differ by less than this fraction.
+    #[arg(long, default_value_t = 0.01)]
+    max_depth_error: f64,
+    /// Start a point at every N-th pixel of each depth map (in both directions).
+    #[arg(long, default_value_t = 2)]
+    pixel_step: usize,
+}
+
+impl DensifyArgs {
+    fn options(&self) -> Result<frond::mvs::DensifyOptions> {
+        if self.max_image_size < 64 {
+            bail!("--max-image-size must be at least 64 pixels");
+        }
+        if self.partners == 0 || self.pixel_step == 0 {
+            bail!("--partners and --pixel-step must be at least 1");
+        }
+        if !(self.max_depth_error > 0.0 && self.max_depth_error < 1.0) {
+            bail!("--max-depth-error must lie in (0, 1)");
+        }
+        if !(self.roi_radius >= 0.0) {
+            bail!("--roi-radius must be 0 or more");
+        }
+        let mut options = frond::mvs::DensifyOptions {
+            max_image_size: self.max_image_size,
+            roi_radius: self.roi_radius,
+            ..Default::default()
+        };
+        options.pairs.partners_per_view = self.partners;
+        options.fusion.min_consistent = self.min_consistent;
+        options.fusion.max_relative_depth_error = self.max_depth_error;
+        options.fusion.pixel_step = self.pixel_step;
+        Ok(options)
+    }
 }
 
 /// Segmentation parameters (seed 004 §5.1 defaults).
@@ -377,6 +444,49 @@ fn eval(gt: &Path, pred: &Path, pred_model: Option<&Path>, json: bool) -> Result
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         print!("{}", report.to_text());
+    }
+    Ok(())
+}
+
+/// `frond eval --dense`: point accuracy of a dense workspace against the truth.
+fn eval_dense(gt: &Path, dense: &Path, json: bool) -> Result<()> {
+    let truth =
+        GroundTruth::load(gt).with_context(|| format!("reading ground truth {}", gt.display()))?;
+    let source = SceneSource::locate(dense)
+        .with_context(|| format!("finding a dense workspace in {}", dense.display()))?;
+    let model_dir = source.model_dir.clone();
+    let scene = load_scene(source)?;
+    let positions: Vec<nalgebra::Point3<f64>> = match &scene.dense {
+        Some(points) => points.positions_world.iter().map(|p| p.cast()).collect(),
+        None => scene
+            .reconstruction
+            .points()
+            .iter()
+            .map(|p| p.position_world)
+            .collect(),
+    };
+    let (similarity, alignment) = align_to_ground_truth(gt, &model_dir)?;
+    let aligned: Vec<_> = positions.iter().map(|p| similarity.apply(p)).collect();
+    let accuracy = frond::eval::dense::point_accuracy(&truth, &aligned, 0.02)?;
+    if json {
+        let value = serde_json::json!({ "alignment": alignment, "points": accuracy });
+        println!("{}", serde_json::to_string_pretty(&value)?);
+    } else {
+        println!(
+            "{} points, {} on the plant ({} on leaves; {}/{} leaves with ≥ 20 points)\n\
+             distance to the true surface: median {:.3} mm = {:.3} % of the plant height, 90th percentile {:.3} mm\n\
+             aligned by {} cameras (RMS residual {:.2} mm)",
+            accuracy.points,
+            accuracy.plant_points,
+            accuracy.leaf_points,
+            accuracy.leaves_covered,
+            accuracy.leaves_total,
+            accuracy.median_error * 1e3,
+            accuracy.median_error_fraction_of_height * 100.0,
+            accuracy.p90_error * 1e3,
+            alignment.cameras_matched,
+            alignment.rms_camera_residual * 1e3,
+        );
     }
     Ok(())
 }
@@ -645,6 +755,27 @@ fn replay(project: &Path, out: Option<&Path>) -> Result<()> {
     Ok(())
 }
 
+/// `frond densify`: dense workspace from a COLMAP scene.
+fn densify(scene_args: &SceneArgs, options: &frond::mvs::DensifyOptions, out: &Path) -> Result<()> {
+    let scene = load_scene(scene_args.source()?)?;
+    let progress = BarProgress::new();
+    let (fused, report) = frond::mvs::densify(&scene, options, &progress)
+        .with_context(|| format!("densifying {}", scene.source.model_dir.display()))?;
+    progress.bar.finish_and_clear();
+    let dense = frond::mvs::write_workspace(&scene, &fused, &report, options, out)
+        .with_context(|| format!("writing the dense workspace {}", out.display()))?;
+    println!(
+        "{} points ({:.1} views each) from {}/{} pairs, {:.1} s; wrote {}",
+        dense.points().len(),
+        report.mean_views_per_point,
+        report.pairs_matched,
+        report.pairs,
+        report.timings.values().sum::<f64>(),
+        out.display()
+    );
+    Ok(())
+}
+
 fn init_logging(verbose: u8) {
     let default = match verbose {
         0 => "warn",
@@ -682,6 +813,7 @@ fn main() -> Result<()> {
         } => synth(
             *preset, *seed, *views, *size, *points, *noise, *outliers, *no_points, out,
         ),
+        Command::Densify { scene, out, params } => densify(scene, &params.options()?, out),
         Command::Segment { scene, out, params } => run_segmentation(scene, params, out).map(|_| ()),
         Command::Reconstruct {
             scene,
@@ -695,7 +827,12 @@ fn main() -> Result<()> {
             gt,
             pred,
             pred_model,
+            dense,
             json,
-        } => eval(gt, pred, pred_model.as_deref(), *json),
+        } => match (pred, dense) {
+            (_, Some(dense)) => eval_dense(gt, dense, *json),
+            (Some(pred), None) => eval(gt, pred, pred_model.as_deref(), *json),
+            (None, None) => bail!("give --pred or --dense"),
+        },
     }
 }

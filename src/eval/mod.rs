@@ -11,6 +11,7 @@
 //! truth surface sample.
 
 pub mod align;
+pub mod dense;
 pub mod geometry;
 pub mod metrics;
 

@@ -30,7 +30,7 @@ use crate::scene::model::{Image, Keypoint, Point3D, Reconstruction, TrackElement
 use crate::scene::ply::{Column, Element, Ply, ScalarType, encode_ply_binary};
 use crate::scene::synthetic::look_at;
 use crate::scene::{Camera, CameraModelKind, ModelFormat, SceneError, write_model};
-use crate::util::atomic::write_atomic;
+use crate::util::atomic::{StagedDir, write_atomic};
 use crate::util::progress::Progress;
 use crate::util::rng::Rng;
 
@@ -288,20 +288,7 @@ pub fn write_dataset(
     lap("render", &mut timings);
 
     // Assemble in a sibling folder, then rename into place.
-    let parent = out
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    std::fs::create_dir_all(parent).map_err(|e| output_error(parent, e))?;
-    let staging = tempfile::Builder::new()
-        .prefix(&format!(
-            ".{}.partial-",
-            out.file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default()
-        ))
-        .tempdir_in(parent)
-        .map_err(|e| output_error(parent, e))?;
+    let staging = StagedDir::new(out).map_err(|e| output_error(out, e))?;
     let root = staging.path();
     for dir in ["images", "sparse/0", "gt/leaves", "gt/masks"] {
         std::fs::create_dir_all(root.join(dir)).map_err(|e| output_error(&root.join(dir), e))?;
@@ -398,11 +385,7 @@ pub fn write_dataset(
     )?;
 
     // Move into place.
-    let staged = staging.keep();
-    if out.exists() {
-        std::fs::remove_dir_all(out).map_err(|e| output_error(out, e))?;
-    }
-    std::fs::rename(&staged, out).map_err(|e| output_error(out, e))?;
+    staging.commit().map_err(|e| output_error(out, e))?;
     Ok(summary)
 }
 

@@ -43,6 +43,52 @@ pub fn write_atomic_with(
     Ok(())
 }
 
+/// A folder assembled beside its destination and renamed into place by [`StagedDir::commit`],
+/// so that readers see either the old folder or the whole new one. Dropped uncommitted, the
+/// partial folder is removed.
+pub struct StagedDir {
+    staging: tempfile::TempDir,
+    destination: std::path::PathBuf,
+}
+
+impl StagedDir {
+    /// Creates `.NAME.partial-XXXX` next to `destination` (creating its parent).
+    pub fn new(destination: &Path) -> std::io::Result<Self> {
+        let parent = match destination.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        std::fs::create_dir_all(parent)?;
+        let name = destination.file_name().ok_or_else(|| {
+            std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "destination has no folder name",
+            )
+        })?;
+        let staging = tempfile::Builder::new()
+            .prefix(&format!(".{}.partial-", name.to_string_lossy()))
+            .tempdir_in(parent)?;
+        Ok(Self {
+            staging,
+            destination: destination.to_path_buf(),
+        })
+    }
+
+    /// The folder to fill.
+    pub fn path(&self) -> &Path {
+        self.staging.path()
+    }
+
+    /// Replaces the destination (if any) by the staged folder.
+    pub fn commit(self) -> std::io::Result<()> {
+        let staged = self.staging.keep();
+        if self.destination.exists() {
+            std::fs::remove_dir_all(&self.destination)?;
+        }
+        std::fs::rename(&staged, &self.destination)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -69,6 +115,27 @@ mod tests {
         });
         assert!(result.is_err());
         assert_eq!(std::fs::read_to_string(&path).unwrap(), "old");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn staged_dir_appears_whole_or_not_at_all() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("result");
+        std::fs::create_dir(&out).unwrap();
+        std::fs::write(out.join("old.txt"), "old").unwrap();
+        {
+            let staged = StagedDir::new(&out).unwrap();
+            std::fs::write(staged.path().join("new.txt"), "new").unwrap();
+            // Dropped without commit: the old folder stays, the partial one is gone.
+        }
+        assert!(out.join("old.txt").is_file());
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+        let staged = StagedDir::new(&out).unwrap();
+        std::fs::write(staged.path().join("new.txt"), "new").unwrap();
+        staged.commit().unwrap();
+        assert!(!out.join("old.txt").exists());
+        assert_eq!(std::fs::read_to_string(out.join("new.txt")).unwrap(), "new");
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
     }
 }

@@ -1,0 +1,480 @@
+//! Multi-view consistency and fusion of pairwise depth maps into one point set with
+//! visibility, in the manner of COLMAP's stereo fusion: a depth is kept only when the depth
+//! maps of other views agree with it (relative depth difference below a threshold), the
+//! agreeing estimates are averaged along each view's ray, and the survivors are merged on a
+//! voxel grid about one image footprint wide so each surface patch yields one point.
+
+use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use super::stereo::DepthMap;
+use crate::util::progress::Progress;
+
+/// Fusion settings.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct FusionOptions {
+    /// Two depths agree when they differ by less than this fraction of the depth.
+    pub max_relative_depth_error: f64,
+    /// Other depth maps that must agree with a depth for it to be kept.
+    pub min_consistent: usize,
+    /// Depth maps checked against each depth map: those whose views look most alike (≤ 64).
+    pub neighbour_maps: usize,
+    /// Every `pixel_step`-th pixel of each depth map (in both directions) starts a point.
+    pub pixel_step: usize,
+    /// Voxel side of the merge grid in image footprints (depth / focal × pixel step).
+    pub voxel_footprints: f64,
+}
+
+impl Default for FusionOptions {
+    fn default() -> Self {
+        Self {
+            max_relative_depth_error: 0.01,
+            min_consistent: 2,
+            neighbour_maps: 10,
+            pixel_step: 2,
+            voxel_footprints: 1.0,
+        }
+    }
+}
+
+/// The ball the views converge on: depths outside it are not fused.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct RegionOfInterest {
+    pub center_world: Point3<f64>,
+    pub radius: f64,
+}
+
+impl RegionOfInterest {
+    pub fn contains(&self, point_world: &Point3<f64>) -> bool {
+        (point_world - self.center_world).norm_squared() <= self.radius * self.radius
+    }
+
+    /// For an object-centric capture: the point nearest (least squares) to all viewing
+    /// axes, and `radius_factor` times the median camera distance to it. `None` when the axes
+    /// do not converge in front of most cameras (e.g. a forward-moving camera).
+    pub fn converging(
+        centers_world: &[Point3<f64>],
+        axes_world: &[Vector3<f64>],
+        radius_factor: f64,
+    ) -> Option<Self> {
+        if centers_world.len() < 2 || radius_factor.is_nan() || radius_factor <= 0.0 {
+            return None;
+        }
+        let mut normal = nalgebra::Matrix3::zeros();
+        let mut rhs = Vector3::zeros();
+        for (c, d) in centers_world.iter().zip(axes_world) {
+            let d = d.normalize();
+            let projector = nalgebra::Matrix3::identity() - d * d.transpose();
+            normal += projector;
+            rhs += projector * c.coords;
+        }
+        // Nearly parallel axes leave the system ill-conditioned.
+        let eigen = normal.symmetric_eigen();
+        let (lo, hi) = eigen
+            .eigenvalues
+            .iter()
+            .fold((f64::INFINITY, 0.0f64), |(lo, hi), &e| {
+                (lo.min(e), hi.max(e))
+            });
+        if lo.is_nan() || lo <= 1e-3 * hi {
+            return None;
+        }
+        let center_world = Point3::from(normal.try_inverse()? * rhs);
+        let in_front = centers_world
+            .iter()
+            .zip(axes_world)
+            .filter(|(c, d)| (center_world - **c).dot(d) > 0.0)
+            .count();
+        if in_front * 4 < centers_world.len() * 3 {
+            return None;
+        }
+        let distances: Vec<f64> = centers_world
+            .iter()
+            .map(|c| (center_world - c).norm())
+            .collect();
+        let radius = radius_factor * median(distances)?;
+        (radius > 0.0 && center_world.iter().all(|c| c.is_finite())).then_some(Self {
+            center_world,
+            radius,
+        })
+    }
+}
+
+/// Fused points: positions, colours, the views (image positions, sorted) that see each, and
+/// how many depth estimates each averages.
+#[derive(Clone, Debug, Default)]
+pub struct FusedPoints {
+    pub positions_world: Vec<Point3<f64>>,
+    pub colors: Vec<[u8; 3]>,
+    pub views: Vec<Vec<u32>>,
+    pub support: Vec<u32>,
+}
+
+impl FusedPoints {
+    pub fn len(&self) -> usize {
+        self.positions_world.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.positions_world.is_empty()
+    }
+}
+
+/// What fusion did.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct FusionStats {
+    pub depth_samples: usize,
+    pub consistent_samples: usize,
+    /// Median merge-voxel side over the kept samples (world units).
+    pub voxel_size: f64,
+    pub points: usize,
+}
+
+/// A depth sample that enough other maps agreed with.
+struct Candidate {
+    position_world: Point3<f64>,
+    color: [u8; 3],
+    map: u32,
+    /// Bit k: neighbour k of `map` agreed.
+    agreeing: u64,
+    estimates: u32,
+}
+
+/// For each map, the other maps whose left views' axes are closest in angle.
+fn neighbour_maps(maps: &[DepthMap], count: usize) -> Vec<Vec<usize>> {
+    let axes: Vec<Vector3<f64>> = maps
+        .iter()
+        .map(|m| m.camera.rect_from_world.inverse() * Vector3::z())
+        .collect();
+    let centers: Vec<Point3<f64>> = maps.iter().map(|m| m.camera.center_world).collect();
+    (0..maps.len())
+        .map(|p| {
+            let mut others: Vec<(f64, usize)> = (0..maps.len())
+                .filter(|&q| q != p)
+                .map(|q| {
+                    // Axis angle, with the centre distance breaking ties between maps of
+                    // one view.
+                    (
+                        -axes[p].dot(&axes[q]) + 1e-9 * (centers[p] - centers[q]).norm(),
+                        q,
+                    )
+                })
+                .collect();
+            others.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            others
+                .into_iter()
+                .take(count.min(64))
+                .map(|(_, q)| q)
+                .collect()
+        })
+        .collect()
+}
+
+/// Checks every `pixel_step`-th depth of `maps[p]` against its neighbours.
+fn consistent_samples(
+    p: usize,
+    maps: &[DepthMap],
+    neighbours: &[usize],
+    options: &FusionOptions,
+    roi: Option<&RegionOfInterest>,
+) -> (usize, Vec<Candidate>) {
+    let map = &maps[p];
+    let step = options.pixel_step.max(1);
+    let mut samples = 0;
+    let mut out = Vec::new();
+    for j in (0..map.camera.height).step_by(step) {
+        for i in (0..map.camera.width).step_by(step) {
+            let z = map.depth_at(i, j);
+            if z.is_nan() || z <= 0.0 {
+                continue;
+            }
+            let point = map.camera.unproject_pixel(i, j, z as f64);
+            if roi.is_some_and(|r| !r.contains(&point)) {
+                continue;
+            }
+            samples += 1;
+            let mut sum = point.coords;
+            let mut agreeing = 0u64;
+            let mut estimates = 1u32;
+            for (k, &q) in neighbours.iter().enumerate() {
+                let other = &maps[q];
+                let Some((uv, depth)) = other.camera.project(&point) else {
+                    continue;
+                };
+                let Some((iq, jq)) = other.camera.pixel_of(&uv) else {
+                    continue;
+                };
+                let other_depth = other.depth_at(iq, jq) as f64;
+                if other_depth > 0.0
+                    && (other_depth - depth).abs() <= options.max_relative_depth_error * depth
+                {
+                    // The other map's estimate, on the ray from its centre through the point.
+                    let center = other.camera.center_world;
+                    sum += center.coords + (point - center) * (other_depth / depth);
+                    agreeing |= 1 << k;
+                    estimates += 1;
+                }
+            }
+            if (estimates - 1) as usize >= options.min_consistent {
+                out.push(Candidate {
+                    position_world: Point3::from(sum / estimates as f64),
+                    color: map.colors[j * map.camera.width + i],
+                    map: p as u32,
+                    agreeing,
+                    estimates,
+                });
+            }
+        }
+    }
+    (samples, out)
+}
+
+fn median(mut values: Vec<f64>) -> Option<f64> {
+    if values.is_empty() {
+        return None;
+    }
+    values.sort_by(f64::total_cmp);
+    Some(values[values.len() / 2])
+}
+
+/// Fuses depth maps into points (see the module docs). Deterministic.
+pub fn fuse(
+    maps: &[DepthMap],
+    options: &FusionOptions,
+    roi: Option<&RegionOfInterest>,
+    progress: &dyn Progress,
+) -> (FusedPoints, FusionStats) {
+    let neighbours = neighbour_maps(maps, options.neighbour_maps);
+    progress.stage("fusing depth maps", maps.len() as u64);
+    let per_map: Vec<(usize, Vec<Candidate>)> = (0..maps.len())
+        .into_par_iter()
+        .map(|p| {
+            let result = consistent_samples(p, maps, &neighbours[p], options, roi);
+            progress.advance(1);
+            result
+        })
+        .collect();
+    let mut stats = FusionStats {
+        depth_samples: per_map.iter().map(|(n, _)| n).sum(),
+        ..FusionStats::default()
+    };
+    let candidates: Vec<Candidate> = per_map.into_iter().flat_map(|(_, c)| c).collect();
+    stats.consistent_samples = candidates.len();
+
+    // Voxel side: the footprint of one sampled pixel at the candidate's depth, rounded to a
+    // power of two so that views at similar distances share one grid.
+    let step = options.pixel_step.max(1) as f64 * options.voxel_footprints;
+    let key = |candidate: &Candidate| {
+        let map = &maps[candidate.map as usize];
+        let depth = (candidate.position_world - map.camera.center_world).norm();
+        let level = (depth / map.camera.focal_px * step).log2().round() as i64;
+        let voxel = (level as f64).exp2();
+        let p = &candidate.position_world;
+        [
+            level,
+            (p.x / voxel).floor() as i64,
+            (p.y / voxel).floor() as i64,
+            (p.z / voxel).floor() as i64,
+        ]
+    };
+    let mut order: Vec<([i64; 4], usize)> = candidates
+        .iter()
+        .enumerate()
+        .map(|(c, candidate)| (key(candidate), c))
+        .collect();
+    order.par_sort_unstable();
+    stats.voxel_size = median(
+        order
+            .iter()
+            .step_by(97)
+            .map(|(k, _)| (k[0] as f64).exp2())
+            .collect(),
+    )
+    .unwrap_or(0.0);
+
+    let mut fused = FusedPoints::default();
+    let mut start = 0;
+    while start < order.len() {
+        let mut end = start + 1;
+        while end < order.len() && order[end].0 == order[start].0 {
+            end += 1;
+        }
+        let mut sum = Vector3::zeros();
+        let mut color_sum = [0u64; 3];
+        let mut weight = 0u64;
+        let mut views = Vec::new();
+        for &(_, c) in &order[start..end] {
+            let candidate = &candidates[c];
+            let w = candidate.estimates as u64;
+            sum += candidate.position_world.coords * w as f64;
+            for (s, v) in color_sum.iter_mut().zip(candidate.color) {
+                *s += v as u64 * w;
+            }
+            weight += w;
+            let map = &maps[candidate.map as usize];
+            views.extend([map.pair.left as u32, map.pair.right as u32]);
+            for (k, &q) in neighbours[candidate.map as usize].iter().enumerate() {
+                if candidate.agreeing & (1 << k) != 0 {
+                    views.extend([maps[q].pair.left as u32, maps[q].pair.right as u32]);
+                }
+            }
+        }
+        views.sort_unstable();
+        views.dedup();
+        fused
+            .positions_world
+            .push(Point3::from(sum / weight as f64));
+        fused
+            .colors
+            .push(color_sum.map(|s| ((s + weight / 2) / weight) as u8));
+        fused.views.push(views);
+        fused.support.push(weight as u32);
+        start = end;
+    }
+    stats.points = fused.len();
+    (fused, stats)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mvs::pairs::StereoPair;
+    use crate::mvs::pairs::tests::ring_model;
+    use crate::mvs::rectify::RectifiedPair;
+    use crate::util::progress::NoProgress;
+
+    const RADIUS: f64 = 0.5;
+
+    /// Exact depth maps of a ball of radius 0.5 at the origin, one per ring neighbour pair.
+    fn sphere_maps(num_views: usize) -> Vec<DepthMap> {
+        let model = ring_model(num_views, 20);
+        let images = model.images();
+        let camera = model.camera_of(&images[0]);
+        (0..num_views)
+            .map(|left| {
+                let right = (left + 1) % num_views;
+                let rectified = RectifiedPair::new(
+                    (&images[left], camera),
+                    (&images[right], camera),
+                    0.25,
+                    4000,
+                )
+                .unwrap();
+                let rect = rectified.left.clone();
+                let mut depth = vec![0.0f32; rect.width * rect.height];
+                for j in 0..rect.height {
+                    for i in 0..rect.width {
+                        // Ray–sphere intersection along the pixel's ray (rect z = 1 scaling).
+                        let direction = rect.unproject_pixel(i, j, 1.0) - rect.center_world;
+                        let origin = rect.center_world.coords;
+                        let a = direction.norm_squared();
+                        let b = 2.0 * origin.dot(&direction);
+                        let c = origin.norm_squared() - RADIUS * RADIUS;
+                        let disc = b * b - 4.0 * a * c;
+                        if disc > 0.0 {
+                            depth[j * rect.width + i] = ((-b - disc.sqrt()) / (2.0 * a)) as f32;
+                        }
+                    }
+                }
+                DepthMap {
+                    pair: StereoPair {
+                        left,
+                        right,
+                        shared_points: 20,
+                        angle_deg: 360.0 / num_views as f64,
+                    },
+                    colors: vec![[10, 200, 30]; depth.len()],
+                    camera: rect,
+                    depth,
+                    disparity_range: (0, 16),
+                }
+            })
+            .collect()
+    }
+
+    fn surface_error(p: &Point3<f64>) -> f64 {
+        (p.coords.norm() - RADIUS).abs()
+    }
+
+    #[test]
+    fn exact_depths_fuse_onto_the_surface_with_visibility() {
+        let maps = sphere_maps(24);
+        let (fused, stats) = fuse(&maps, &FusionOptions::default(), None, &NoProgress);
+        assert!(fused.len() > 500, "{stats:?}");
+        // Merged points sit on the sphere to well under one voxel.
+        let worst = fused
+            .positions_world
+            .iter()
+            .map(surface_error)
+            .fold(0.0, f64::max);
+        assert!(
+            worst < 0.5 * stats.voxel_size,
+            "{worst} vs voxel {}",
+            stats.voxel_size
+        );
+        for (p, views) in fused.positions_world.iter().zip(&fused.views) {
+            assert!(views.len() >= 3 && views.windows(2).all(|w| w[0] < w[1]));
+            // Every listed view sees the point (up to 10° past grazing, where a hidden point's
+            // depth matches the rim's), or is the partner of the view of an agreeing map
+            // (these exact maps do not check the partner; stereo matching does).
+            let sees = |v: usize| {
+                let angle = std::f64::consts::TAU * v as f64 / 24.0;
+                let camera = Point3::new(4.0 * angle.cos(), 4.0 * angle.sin(), 0.0);
+                p.coords.normalize().dot(&(camera - p).normalize()) > -(10f64.to_radians().sin())
+            };
+            for &v in views {
+                let v = v as usize;
+                assert!(
+                    sees(v) || sees((v + 23) % 24),
+                    "view {v} sees {p} from behind"
+                );
+            }
+        }
+        // Deterministic.
+        let (again, _) = fuse(&maps, &FusionOptions::default(), None, &NoProgress);
+        assert_eq!(again.positions_world, fused.positions_world);
+        assert_eq!(again.views, fused.views);
+    }
+
+    #[test]
+    fn a_wrong_depth_map_is_outvoted_and_the_region_of_interest_crops() {
+        let mut maps = sphere_maps(24);
+        for z in &mut maps[5].depth {
+            *z *= 1.2;
+        }
+        let (fused, _) = fuse(&maps, &FusionOptions::default(), None, &NoProgress);
+        let worst = fused
+            .positions_world
+            .iter()
+            .map(surface_error)
+            .fold(0.0, f64::max);
+        assert!(
+            worst < 0.02 * RADIUS,
+            "a 20 % depth error survived: {worst}"
+        );
+        let small = RegionOfInterest {
+            center_world: Point3::origin(),
+            radius: 0.3,
+        };
+        let (cropped, _) = fuse(&maps, &FusionOptions::default(), Some(&small), &NoProgress);
+        assert!(cropped.is_empty());
+    }
+
+    #[test]
+    fn views_of_a_ring_converge_on_its_centre() {
+        let model = ring_model(12, 10);
+        let centers: Vec<_> = model.images().iter().map(|i| i.center_world()).collect();
+        let axes: Vec<_> = model
+            .images()
+            .iter()
+            .map(|i| i.view_direction_world())
+            .collect();
+        let roi = RegionOfInterest::converging(&centers, &axes, 0.5).unwrap();
+        assert!(roi.center_world.coords.norm() < 1e-9);
+        assert!((roi.radius - 2.0).abs() < 1e-9);
+        // Parallel axes (a camera moving sideways) converge nowhere.
+        let parallel: Vec<_> = (0..5).map(|k| Point3::new(k as f64, 0.0, 0.0)).collect();
+        assert!(RegionOfInterest::converging(&parallel, &[Vector3::z(); 5], 1.0).is_none());
+    }
+}
