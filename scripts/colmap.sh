@@ -1,6 +1,9 @@
 #!/usr/bin/env bash
 # Runs COLMAP's sparse reconstruction on the CPU over DIR/images:
-#   DIR/colmap/database.db, DIR/colmap/sparse/0 (the largest model), and a summary line.
+#   DIR/colmap/database.db, DIR/colmap/sparse/0 (the largest model), DIR/colmap/dense (its
+#   undistorted workspace, input for `frond densify`), and a summary line.
+# `frond sfm PHOTOS --out OUT` does the same from Rust (with sfm.json); this script is the
+# plain-shell equivalent for users who drive COLMAP themselves.
 # Usage: scripts/colmap.sh DIR [--matcher exhaustive|sequential] [--camera PINHOLE|SIMPLE_RADIAL|OPENCV]
 # Matching is exhaustive up to 60 images, sequential beyond (override with --matcher).
 set -euo pipefail
@@ -48,4 +51,7 @@ for model in "$out"/sparse/*/; do
   if [ "${registered:-0}" -gt "$best_images" ]; then best="$model"; best_images="$registered"; fi
 done
 [ -n "$best" ] || { echo "COLMAP registered no model" >&2; exit 1; }
+step "undistortion" \
+  colmap image_undistorter --image_path "$dir/images" --input_path "$best" \
+    --output_path "$out/dense" --output_type COLMAP
 echo "registered $best_images / $num_images images in $(( $(date +%s) - start )) s (best model: $best)"

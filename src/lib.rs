@@ -4,6 +4,7 @@
 //! as textured meshes, branches as generalized cylinders) comes out. Stages, in data-flow order:
 //!
 //! - [`scene`]: COLMAP models (text and binary, every camera model), images, dense points.
+//! - [`sfm`]: structure from motion by the installed COLMAP (CPU).
 //! - [`mvs`]: semi-dense multi-view stereo on the CPU (pairwise semi-global matching, fusion).
 //! - [`graph`]: leaf segmentation (kNN graph with 3D/2D weights, threshold partition,
 //!   normalized cuts, foreground separation).
@@ -27,5 +28,6 @@ pub mod mvs;
 pub mod render;
 pub mod scene;
 pub mod segment;
+pub mod sfm;
 pub mod synth;
 pub mod util;

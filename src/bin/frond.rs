@@ -74,6 +74,17 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Structure from motion by the installed COLMAP on the CPU: features, matching, mapping,
+    /// undistortion. Writes database.db, sparse/0 (the largest model), dense/ (undistorted
+    /// workspace for `frond densify`), colmap.log and sfm.json.
+    Sfm {
+        /// Folder of photos (png, jpg, tif, bmp).
+        photos: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
+        #[command(flatten)]
+        params: SfmArgs,
+    },
     /// Semi-dense multi-view stereo on the CPU: pairwise semi-global matching of rectified
     /// views, multi-view consistency and fusion. Writes a dense workspace (sparse/ with the
     /// fused points and their tracks, images/, fused.ply, fused.ply.vis, densify.json).
@@ -94,11 +105,17 @@ enum Command {
         #[command(flatten)]
         params: SegmentArgs,
     },
-    /// Reconstruct a plant from a COLMAP folder: foreground, segmentation, image boundaries,
-    /// leaf fitting, export (plant.glb, plant.obj, segmentation.ply, report.json).
+    /// Reconstruct a plant from a COLMAP folder, or from a folder of photos (then `sfm` and
+    /// `densify` run first, into OUT/sfm and OUT/dense): foreground, segmentation, image
+    /// boundaries, leaf fitting, branches, export (plant.glb, plant.obj, segmentation.ply,
+    /// report.json).
     Reconstruct {
         #[command(flatten)]
         scene: SceneArgs,
+        #[command(flatten)]
+        sfm: SfmArgs,
+        #[command(flatten)]
+        dense: DensifyArgs,
         #[arg(long)]
         out: PathBuf,
         #[command(flatten)]
@@ -142,6 +159,56 @@ enum Command {
     },
 }
 
+#[derive(Clone, Copy, ValueEnum)]
+enum MatcherArg {
+    /// Exhaustive up to 60 photos, sequential beyond.
+    Auto,
+    Exhaustive,
+    Sequential,
+}
+
+/// Structure-from-motion parameters.
+#[derive(Args, Clone)]
+struct SfmArgs {
+    #[arg(long, value_enum, default_value = "auto")]
+    matcher: MatcherArg,
+    /// Use COLMAP's vocabulary-tree matcher with this tree file (large photo sets).
+    #[arg(long, conflicts_with = "matcher")]
+    vocab_tree: Option<PathBuf>,
+    /// COLMAP camera model of the photos.
+    #[arg(long, default_value = "SIMPLE_RADIAL")]
+    camera_model: String,
+    /// One camera per photo instead of one shared camera.
+    #[arg(long)]
+    camera_per_photo: bool,
+    /// Longest side of the undistorted images (0: as taken).
+    #[arg(long, default_value_t = 0)]
+    undistorted_size: u32,
+}
+
+impl SfmArgs {
+    fn options(&self) -> Result<frond::sfm::SfmOptions> {
+        if frond::scene::CameraModelKind::from_name(&self.camera_model).is_none() {
+            bail!(
+                "--camera-model {}: not a COLMAP camera model",
+                self.camera_model
+            );
+        }
+        Ok(frond::sfm::SfmOptions {
+            matcher: match (&self.vocab_tree, self.matcher) {
+                (Some(tree), _) => frond::sfm::Matcher::VocabTree(tree.clone()),
+                (None, MatcherArg::Auto) => frond::sfm::Matcher::Auto,
+                (None, MatcherArg::Exhaustive) => frond::sfm::Matcher::Exhaustive,
+                (None, MatcherArg::Sequential) => frond::sfm::Matcher::Sequential,
+            },
+            camera_model: self.camera_model.clone(),
+            single_camera: !self.camera_per_photo,
+            max_image_size: self.undistorted_size,
+            ..frond::sfm::SfmOptions::default()
+        })
+    }
+}
+
 /// Dense stereo parameters.
 #[derive(Args, Clone, Copy)]
 struct DensifyArgs {
@@ -156,7 +223,7 @@ struct DensifyArgs {
     #[arg(long, default_value_t = 1)]
     partners: usize,
     /// Other depth maps that must agree with a depth for it to be kept.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 4)]
     min_consistent: usize,
     /// Depths agree when they differ by less than this fraction.
     #[arg(long, default_value_t = 0.01)]
@@ -164,6 +231,9 @@ struct DensifyArgs {
     /// Start a point at every N-th pixel of each depth map (in both directions).
     #[arg(long, default_value_t = 2)]
     pixel_step: usize,
+    /// Point spacing: the merge voxel's side in pixel footprints at the object.
+    #[arg(long, default_value_t = 1.5)]
+    voxel_pixels: f64,
 }
 
 impl DensifyArgs {
@@ -177,7 +247,7 @@ impl DensifyArgs {
         if !(self.max_depth_error > 0.0 && self.max_depth_error < 1.0) {
             bail!("--max-depth-error must lie in (0, 1)");
         }
-        if !(self.roi_radius >= 0.0) {
+        if self.roi_radius.is_nan() || self.roi_radius < 0.0 {
             bail!("--roi-radius must be 0 or more");
         }
         let mut options = frond::mvs::DensifyOptions {
@@ -189,6 +259,10 @@ impl DensifyArgs {
         options.fusion.min_consistent = self.min_consistent;
         options.fusion.max_relative_depth_error = self.max_depth_error;
         options.fusion.pixel_step = self.pixel_step;
+        if self.voxel_pixels.is_nan() || self.voxel_pixels < 0.5 {
+            bail!("--voxel-pixels must be at least 0.5");
+        }
+        options.fusion.voxel_pixels = self.voxel_pixels;
         Ok(options)
     }
 }
@@ -755,6 +829,41 @@ fn replay(project: &Path, out: Option<&Path>) -> Result<()> {
     Ok(())
 }
 
+/// The scene path when it is a folder of photos without any COLMAP model.
+fn photos_folder(scene_args: &SceneArgs) -> Option<PathBuf> {
+    let path = scene_args.path.as_ref()?;
+    if scene_args.model.is_some() || !path.is_dir() || SceneSource::locate(path).is_ok() {
+        return None;
+    }
+    let photos = frond::sfm::list_photos(path).ok()?;
+    (!photos.is_empty()).then(|| path.clone())
+}
+
+/// `frond sfm`: COLMAP on a folder of photos.
+fn sfm(
+    photos: &Path,
+    options: &frond::sfm::SfmOptions,
+    out: &Path,
+) -> Result<frond::sfm::SfmReport> {
+    let progress = BarProgress::new();
+    let report = frond::sfm::run_sfm(photos, out, options, &progress)
+        .with_context(|| format!("structure from motion on {}", photos.display()))?;
+    progress.bar.finish_and_clear();
+    println!(
+        "COLMAP registered {}/{} photos ({} matching), {} points, {:.1} s; wrote {}",
+        report.registered,
+        report.photos,
+        report.matcher,
+        report.points,
+        report.timings.values().sum::<f64>(),
+        out.display()
+    );
+    if !report.unregistered.is_empty() {
+        eprintln!("not registered: {}", report.unregistered.join(", "));
+    }
+    Ok(report)
+}
+
 /// `frond densify`: dense workspace from a COLMAP scene.
 fn densify(scene_args: &SceneArgs, options: &frond::mvs::DensifyOptions, out: &Path) -> Result<()> {
     let scene = load_scene(scene_args.source()?)?;
@@ -813,15 +922,41 @@ fn main() -> Result<()> {
         } => synth(
             *preset, *seed, *views, *size, *points, *noise, *outliers, *no_points, out,
         ),
+        Command::Sfm {
+            photos,
+            out,
+            params,
+        } => sfm(photos, &params.options()?, out).map(|_| ()),
         Command::Densify { scene, out, params } => densify(scene, &params.options()?, out),
         Command::Segment { scene, out, params } => run_segmentation(scene, params, out).map(|_| ()),
         Command::Reconstruct {
             scene,
+            sfm: sfm_args,
+            dense,
             out,
             params,
             fit,
             template,
-        } => reconstruct(scene, params, *fit, *template, out),
+        } => match photos_folder(scene) {
+            Some(photos) => {
+                let sfm_out = out.join("sfm");
+                sfm(&photos, &sfm_args.options()?, &sfm_out)?;
+                let dense_out = out.join("dense");
+                let sparse_scene = SceneArgs {
+                    path: Some(sfm_out.join("dense")),
+                    model: None,
+                    images: None,
+                };
+                densify(&sparse_scene, &dense.options()?, &dense_out)?;
+                let dense_scene = SceneArgs {
+                    path: Some(dense_out),
+                    model: None,
+                    images: None,
+                };
+                reconstruct(&dense_scene, params, *fit, *template, out)
+            }
+            None => reconstruct(scene, params, *fit, *template, out),
+        },
         Command::Replay { project, out } => replay(project, out.as_deref()),
         Command::Eval {
             gt,

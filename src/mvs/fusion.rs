@@ -1,8 +1,9 @@
 //! Multi-view consistency and fusion of pairwise depth maps into one point set with
 //! visibility, in the manner of COLMAP's stereo fusion: a depth is kept only when the depth
 //! maps of other views agree with it (relative depth difference below a threshold), the
-//! agreeing estimates are averaged along each view's ray, and the survivors are merged on a
-//! voxel grid about one image footprint wide so each surface patch yields one point.
+//! agreeing estimates are averaged along each view's ray, and the survivors are merged on one
+//! voxel grid, a sampled pixel's footprint wide at the object, so each surface patch yields one
+//! point and the density is even over the object.
 
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
@@ -16,24 +17,26 @@ use crate::util::progress::Progress;
 pub struct FusionOptions {
     /// Two depths agree when they differ by less than this fraction of the depth.
     pub max_relative_depth_error: f64,
-    /// Other depth maps that must agree with a depth for it to be kept.
+    /// Other depth maps that must agree with a depth for it to be kept (4, as COLMAP's
+    /// fusion, which asks for 5 pixels in all).
     pub min_consistent: usize,
     /// Depth maps checked against each depth map: those whose views look most alike (≤ 64).
     pub neighbour_maps: usize,
     /// Every `pixel_step`-th pixel of each depth map (in both directions) starts a point.
     pub pixel_step: usize,
-    /// Voxel side of the merge grid in image footprints (depth / focal × pixel step).
-    pub voxel_footprints: f64,
+    /// Voxel side of the merge grid in pixel footprints (depth / focal) at the object: sets
+    /// the point spacing; samples within one voxel are averaged.
+    pub voxel_pixels: f64,
 }
 
 impl Default for FusionOptions {
     fn default() -> Self {
         Self {
             max_relative_depth_error: 0.01,
-            min_consistent: 2,
+            min_consistent: 4,
             neighbour_maps: 10,
             pixel_step: 2,
-            voxel_footprints: 1.0,
+            voxel_pixels: 1.5,
         }
     }
 }
@@ -126,7 +129,7 @@ impl FusedPoints {
 pub struct FusionStats {
     pub depth_samples: usize,
     pub consistent_samples: usize,
-    /// Median merge-voxel side over the kept samples (world units).
+    /// Merge-voxel side (world units).
     pub voxel_size: f64,
     pub points: usize,
 }
@@ -262,36 +265,41 @@ pub fn fuse(
     let candidates: Vec<Candidate> = per_map.into_iter().flat_map(|(_, c)| c).collect();
     stats.consistent_samples = candidates.len();
 
-    // Voxel side: the footprint of one sampled pixel at the candidate's depth, rounded to a
-    // power of two so that views at similar distances share one grid.
-    let step = options.pixel_step.max(1) as f64 * options.voxel_footprints;
-    let key = |candidate: &Candidate| {
-        let map = &maps[candidate.map as usize];
-        let depth = (candidate.position_world - map.camera.center_world).norm();
-        let level = (depth / map.camera.focal_px * step).log2().round() as i64;
-        let voxel = (level as f64).exp2();
-        let p = &candidate.position_world;
+    // Voxel side: the footprint of one sampled pixel at the region of interest's centre (one
+    // grid, so the point density is even over the object), else at the median candidate.
+    let step = options.voxel_pixels.max(0.5);
+    let footprints: Vec<f64> = match roi {
+        Some(roi) => maps
+            .iter()
+            .map(|m| (roi.center_world - m.camera.center_world).norm() / m.camera.focal_px)
+            .collect(),
+        None => candidates
+            .iter()
+            .step_by(97)
+            .map(|c| {
+                let map = &maps[c.map as usize];
+                (c.position_world - map.camera.center_world).norm() / map.camera.focal_px
+            })
+            .collect(),
+    };
+    let Some(footprint) = median(footprints) else {
+        return (FusedPoints::default(), stats);
+    };
+    let voxel = footprint * step;
+    stats.voxel_size = voxel;
+    let key = |p: &Point3<f64>| {
         [
-            level,
             (p.x / voxel).floor() as i64,
             (p.y / voxel).floor() as i64,
             (p.z / voxel).floor() as i64,
         ]
     };
-    let mut order: Vec<([i64; 4], usize)> = candidates
+    let mut order: Vec<([i64; 3], usize)> = candidates
         .iter()
         .enumerate()
-        .map(|(c, candidate)| (key(candidate), c))
+        .map(|(c, candidate)| (key(&candidate.position_world), c))
         .collect();
     order.par_sort_unstable();
-    stats.voxel_size = median(
-        order
-            .iter()
-            .step_by(97)
-            .map(|(k, _)| (k[0] as f64).exp2())
-            .collect(),
-    )
-    .unwrap_or(0.0);
 
     let mut fused = FusedPoints::default();
     let mut start = 0;

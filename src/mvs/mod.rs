@@ -156,6 +156,33 @@ pub fn densify(
     options: &DensifyOptions,
     progress: &dyn Progress,
 ) -> Result<(FusedPoints, DensifyReport), MvsError> {
+    let (maps, mut report) = depth_maps(scene, options, progress)?;
+    let started = Instant::now();
+    let (fused, stats) = fusion::fuse(
+        &maps,
+        &options.fusion,
+        report.region_of_interest.as_ref(),
+        progress,
+    );
+    report.fusion = stats;
+    report.mean_views_per_point = if fused.is_empty() {
+        0.0
+    } else {
+        fused.views.iter().map(Vec::len).sum::<usize>() as f64 / fused.len() as f64
+    };
+    report
+        .timings
+        .insert("fusion".to_owned(), started.elapsed().as_secs_f64());
+    Ok((fused, report))
+}
+
+/// The stereo half of [`densify`]: view pairs, region of interest, and one depth map per
+/// matched pair (in pair order).
+pub fn depth_maps(
+    scene: &Scene,
+    options: &DensifyOptions,
+    progress: &dyn Progress,
+) -> Result<(Vec<DepthMap>, DensifyReport), MvsError> {
     let model = &scene.reconstruction;
     let images = model.images();
     if images.len() < 2 {
@@ -260,15 +287,7 @@ pub fn densify(
     report.depth_pixels = maps.iter().map(DepthMap::valid_pixels).sum();
     lap("stereo", &mut report);
 
-    let (fused, stats) = fusion::fuse(&maps, &options.fusion, roi.as_ref(), progress);
-    report.fusion = stats;
-    report.mean_views_per_point = if fused.is_empty() {
-        0.0
-    } else {
-        fused.views.iter().map(Vec::len).sum::<usize>() as f64 / fused.len() as f64
-    };
-    lap("fusion", &mut report);
-    Ok((fused, report))
+    Ok((maps, report))
 }
 
 /// Rectifies and matches one pair.

@@ -1,0 +1,51 @@
+//! Dense stereo speed (issue target: densify a synthetic broadleaf in ≤ 3 minutes on this
+//! 2-core machine). A 36-view 800×600 broadleaf with sparse-like points (true poses); the full
+//! `densify` beside its two halves measured in the same run: the depth maps alone
+//! (rectification + semi-global matching, the baseline every pairwise-stereo method pays) and
+//! the fusion alone on those maps.
+
+use std::hint::black_box;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use frond::mvs::{DensifyOptions, densify, depth_maps, fusion};
+use frond::scene::Scene;
+use frond::synth::{Preset, SynthOptions, write_dataset};
+use frond::util::progress::NoProgress;
+
+fn dense(c: &mut Criterion) {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let root = dir.path().join("plant");
+    let options = SynthOptions {
+        preset: Preset::Broadleaf,
+        seed: 30,
+        target_points: 5_000,
+        ..SynthOptions::default()
+    };
+    write_dataset(&options, &root, &NoProgress).expect("synthetic dataset");
+    let scene = Scene::open(&root).expect("scene");
+    let densify_options = DensifyOptions::default();
+    let (maps, report) = depth_maps(&scene, &densify_options, &NoProgress).expect("depth maps");
+
+    let mut group = c.benchmark_group("densify_broadleaf_36x800x600");
+    group.sample_size(10);
+    group.bench_function("full", |b| {
+        b.iter(|| black_box(densify(&scene, &densify_options, &NoProgress).expect("densify")))
+    });
+    group.bench_function("depth_maps_only", |b| {
+        b.iter(|| black_box(depth_maps(&scene, &densify_options, &NoProgress).expect("maps")))
+    });
+    group.bench_function("fusion_only", |b| {
+        b.iter(|| {
+            black_box(fusion::fuse(
+                &maps,
+                &densify_options.fusion,
+                report.region_of_interest.as_ref(),
+                &NoProgress,
+            ))
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, dense);
+criterion_main!(benches);
