@@ -259,7 +259,19 @@ pub fn run_sfm(
         s("--Mapper.num_threads"),
         threads,
     ];
-    let seconds = run_colmap(options, "mapping", &mapper, &log)?;
+    let seconds = match run_colmap(options, "mapping", &mapper, &log) {
+        Ok(seconds) => seconds,
+        // The mapper gives up when no image pair can start a model.
+        Err(SfmError::Colmap { log_tail, .. })
+            if log_tail.contains("failed to create sparse model") =>
+        {
+            return Err(SfmError::TooFewRegistered {
+                registered: 0,
+                total: files.len(),
+            });
+        }
+        Err(e) => return Err(e),
+    };
     report.timings.insert("mapping".into(), seconds);
     progress.advance(1);
 

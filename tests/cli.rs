@@ -131,3 +131,50 @@ fn bad_input_fails_with_a_message_naming_the_file() {
     assert!(stderr.contains("points3D.bin: byte"), "{stderr}");
     assert!(stderr.contains("truncated"), "{stderr}");
 }
+
+#[test]
+fn photos_in_too_few_or_unreadable_fail_with_clear_messages() {
+    let dir = tempfile::tempdir().unwrap();
+    let photos = dir.path().join("photos");
+    std::fs::create_dir(&photos).unwrap();
+    for name in ["a.jpg", "b.jpg"] {
+        std::fs::write(photos.join(name), b"not a photo").unwrap();
+    }
+    // `sfm` and `reconstruct` on a photos folder both refuse two photos, naming the folder.
+    for args in [
+        vec!["sfm".to_owned(), photos.display().to_string()],
+        vec!["reconstruct".to_owned(), photos.display().to_string()],
+    ] {
+        let out = dir.path().join("out");
+        let assert = frond()
+            .args(&args)
+            .arg("--out")
+            .arg(&out)
+            .assert()
+            .failure();
+        let stderr = String::from_utf8_lossy(&assert.get_output().stderr).into_owned();
+        assert!(stderr.contains("holds 2 photos"), "{stderr}");
+        assert!(stderr.contains("photos"), "{stderr}");
+        assert!(!out.join("sfm/sparse").exists());
+    }
+    // densify and eval --dense name what is wrong with their inputs.
+    let assert = frond()
+        .args(["densify", "--max-image-size", "10"])
+        .arg(fixture("toy_scene"))
+        .arg("--out")
+        .arg(dir.path().join("dense"))
+        .assert()
+        .failure();
+    let stderr = String::from_utf8_lossy(&assert.get_output().stderr).into_owned();
+    assert!(stderr.contains("--max-image-size"), "{stderr}");
+    let assert = frond()
+        .arg("eval")
+        .arg("--gt")
+        .arg(dir.path())
+        .arg("--dense")
+        .arg(fixture("toy_scene"))
+        .assert()
+        .failure();
+    let stderr = String::from_utf8_lossy(&assert.get_output().stderr).into_owned();
+    assert!(stderr.contains("ground truth"), "{stderr}");
+}
