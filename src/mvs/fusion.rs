@@ -401,8 +401,12 @@ mod tests {
             .collect()
     }
 
-    fn surface_error(p: &Point3<f64>) -> f64 {
-        (p.coords.norm() - RADIUS).abs()
+    fn worst_surface_error(fused: &FusedPoints) -> f64 {
+        fused
+            .positions_world
+            .iter()
+            .map(|p| (p.coords.norm() - RADIUS).abs())
+            .fold(0.0, f64::max)
     }
 
     #[test]
@@ -411,11 +415,7 @@ mod tests {
         let (fused, stats) = fuse(&maps, &FusionOptions::default(), None, &NoProgress);
         assert!(fused.len() > 500, "{stats:?}");
         // Merged points sit on the sphere to well under one voxel.
-        let worst = fused
-            .positions_world
-            .iter()
-            .map(surface_error)
-            .fold(0.0, f64::max);
+        let worst = worst_surface_error(&fused);
         assert!(
             worst < 0.5 * stats.voxel_size,
             "{worst} vs voxel {}",
@@ -452,11 +452,7 @@ mod tests {
             *z *= 1.2;
         }
         let (fused, _) = fuse(&maps, &FusionOptions::default(), None, &NoProgress);
-        let worst = fused
-            .positions_world
-            .iter()
-            .map(surface_error)
-            .fold(0.0, f64::max);
+        let worst = worst_surface_error(&fused);
         assert!(
             worst < 0.02 * RADIUS,
             "a 20 % depth error survived: {worst}"
