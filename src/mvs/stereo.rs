@@ -182,7 +182,7 @@ pub fn match_pair(
     for j in 0..height {
         for i in 0..width {
             let k = j * width + i;
-            if tables.0.0[k] < 0.0 || fixed[k] < (range.0 * 16) as i16 {
+            if tables.0.0[k] < 0.0 || i32::from(fixed[k]) < range.0 * 16 {
                 continue;
             }
             let d = fixed[k] as f64 / 16.0;
