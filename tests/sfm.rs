@@ -8,7 +8,7 @@ mod common;
 use frond::eval::GroundTruth;
 use frond::eval::align_to_ground_truth;
 use frond::eval::dense::point_accuracy;
-use frond::mvs::{DensifyOptions, densify};
+use frond::mvs::{DensifyOptions, densify, write_workspace};
 use frond::scene::Scene;
 use frond::sfm::{SfmOptions, run_sfm};
 use frond::synth::{Preset, SynthOptions, write_dataset};
@@ -49,8 +49,15 @@ fn colmap_then_densify_recovers_the_plant_surface() {
     // The undistorted workspace densifies; its points lie on the true surface.
     let scene = Scene::open(&out.join("dense")).unwrap();
     assert_eq!(scene.reconstruction.images().len(), report.registered);
-    let (fused, dense_report) = densify(&scene, &DensifyOptions::default(), &NoProgress).unwrap();
+    let options = DensifyOptions::default();
+    let (fused, dense_report) = densify(&scene, &options, &NoProgress).unwrap();
     eprintln!("{dense_report:?}");
+    // COLMAP itself reads the dense workspace's model, tracks and all.
+    let workspace = dir.path().join("dense");
+    let dense = write_workspace(&scene, &fused, &dense_report, &options, &workspace).unwrap();
+    let stats = common::analyze(&workspace.join("sparse"));
+    assert_eq!(stats["Points"] as usize, dense.points().len());
+    assert_eq!(stats["Registered images"] as usize, report.registered);
     let (similarity, alignment) =
         align_to_ground_truth(&dataset, &out.join("dense/sparse")).unwrap();
     assert!(alignment.rms_camera_residual < 0.005, "{alignment:?}");
