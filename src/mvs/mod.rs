@@ -310,15 +310,41 @@ fn match_one<'a>(
     let (left_view, right_view) = (view_of(pair.left), view_of(pair.right));
     let scale = left_view.scale.0.min(right_view.scale.0);
     let max_side = (2 * options.max_image_size) as usize;
-    let rectified = RectifiedPair::new((left, left_camera), (right, right_camera), scale, max_side)
-        .ok_or_else(|| skip("the views cannot be rectified (baseline along the view)".into()))?;
-    let disparities = sparse_disparities(model, pair, &rectified, roi);
+    let mut rectified =
+        RectifiedPair::new((left, left_camera), (right, right_camera), scale, max_side)
+            .ok_or_else(|| {
+                skip("the views cannot be rectified (baseline along the view)".into())
+            })?;
+    let mut disparities = sparse_disparities(model, pair, &rectified, roi);
+    // Slide the partner's window so that the sparse points' median disparity is 0: disparities
+    // stay small next to the image width, and both windows show the same part of the scene.
+    let mut sorted = disparities.clone();
+    sorted.retain(|d| d.is_finite());
+    sorted.sort_by(f64::total_cmp);
+    if let Some(&median) = sorted.get(sorted.len() / 2) {
+        let shift = median.round();
+        rectified.shift_partner_window(shift);
+        for d in &mut disparities {
+            *d -= shift;
+        }
+    }
     let range = stereo::disparity_range(
         &disparities,
         options.stereo.range_margin,
         options.stereo.max_disparities,
     )
     .ok_or_else(|| skip("no sparse point in front of both views".into()))?;
+    // Semi-global matching reads out of bounds (and OpenCV 4.6 can abort) when the largest
+    // disparity plus half a block reaches the image width.
+    let widest = range.0.abs().max((range.0 + range.1).abs()) + options.stereo.block_size;
+    if widest as usize >= rectified.left.width {
+        return Err(skip(format!(
+            "disparity range {}..{} is too wide for {} px wide rectified images",
+            range.0,
+            range.0 + range.1,
+            rectified.left.width
+        )));
+    }
     let left_table = rectified
         .left
         .resampling_table(left, left_camera, left_view.scale);

@@ -233,6 +233,12 @@ impl RectifiedPair {
         })
     }
 
+    /// Moves the partner's image window by `shift_px` pixels along the rows (its principal
+    /// point moves by `shift_px`), so every disparity `u_left − u_right` drops by `shift_px`.
+    pub fn shift_partner_window(&mut self, shift_px: f64) {
+        self.right.principal_px.x += shift_px;
+    }
+
     /// The disparity offset from the two principal points, `cx_left − cx_right`.
     fn principal_offset(&self) -> f64 {
         self.left.principal_px.x - self.right.principal_px.x
@@ -283,6 +289,17 @@ mod tests {
                 assert!((back - x).norm() < footprint, "{}", (back - x).norm());
             }
         }
+        // Sliding the partner's window lowers every disparity by the shift; depths stay.
+        let mut pair =
+            RectifiedPair::new((&images[0], camera), (&images[1], camera), 1.0, 4000).unwrap();
+        let x = model.points()[0].position_world;
+        let (d, z) = (
+            pair.disparity_of(&x).unwrap(),
+            pair.left.project(&x).unwrap().1,
+        );
+        pair.shift_partner_window(37.0);
+        assert!((pair.disparity_of(&x).unwrap() - (d - 37.0)).abs() < 1e-9);
+        assert!((pair.depth_from_disparity(d - 37.0).unwrap() - z).abs() < 1e-9 * z);
         // Coincident centres are no pair.
         assert!(
             RectifiedPair::new((&images[0], camera), (&images[0], camera), 1.0, 4000).is_none()
