@@ -168,6 +168,16 @@ fn photos_in_too_few_or_unreadable_fail_with_clear_messages() {
     let stderr = String::from_utf8_lossy(&assert.get_output().stderr).into_owned();
     assert!(stderr.contains("--max-image-size"), "{stderr}");
     let assert = frond()
+        .args(["densify", "--block-size", "4"])
+        .arg(fixture("toy_scene"))
+        .arg("--out")
+        .arg(dir.path().join("dense"))
+        .assert()
+        .failure();
+    let stderr = String::from_utf8_lossy(&assert.get_output().stderr).into_owned();
+    assert!(stderr.contains("--block-size must be odd"), "{stderr}");
+    assert!(!dir.path().join("dense").exists());
+    let assert = frond()
         .arg("eval")
         .arg("--gt")
         .arg(dir.path())

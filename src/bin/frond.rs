@@ -219,6 +219,10 @@ struct DensifyArgs {
     /// converge on (0: everything).
     #[arg(long, default_value_t = 1.0)]
     roi_radius: f64,
+    /// Semi-global matching block side in pixels (odd; smaller keeps thin stems sharper,
+    /// larger is smoother on weak texture).
+    #[arg(long, default_value_t = 5)]
+    block_size: i32,
     /// Stereo partners per view (each gives the view one depth map).
     #[arg(long, default_value_t = 1)]
     partners: usize,
@@ -256,6 +260,10 @@ impl DensifyArgs {
             ..Default::default()
         };
         options.pairs.partners_per_view = self.partners;
+        if self.block_size < 1 || self.block_size > 21 || self.block_size % 2 == 0 {
+            bail!("--block-size must be odd, 1 to 21");
+        }
+        options.stereo.block_size = self.block_size;
         options.fusion.min_consistent = self.min_consistent;
         options.fusion.max_relative_depth_error = self.max_depth_error;
         options.fusion.pixel_step = self.pixel_step;
