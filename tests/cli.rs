@@ -132,6 +132,12 @@ fn bad_input_fails_with_a_message_naming_the_file() {
     assert!(stderr.contains("truncated"), "{stderr}");
 }
 
+/// Runs a command that must fail and returns its standard error.
+fn failure_stderr(command: &mut Command) -> String {
+    let assert = command.assert().failure();
+    String::from_utf8_lossy(&assert.get_output().stderr).into_owned()
+}
+
 #[test]
 fn photos_in_too_few_or_unreadable_fail_with_clear_messages() {
     let dir = tempfile::tempdir().unwrap();
@@ -141,50 +147,36 @@ fn photos_in_too_few_or_unreadable_fail_with_clear_messages() {
         std::fs::write(photos.join(name), b"not a photo").unwrap();
     }
     // `sfm` and `reconstruct` on a photos folder both refuse two photos, naming the folder.
-    for args in [
-        vec!["sfm".to_owned(), photos.display().to_string()],
-        vec!["reconstruct".to_owned(), photos.display().to_string()],
-    ] {
+    for subcommand in ["sfm", "reconstruct"] {
         let out = dir.path().join("out");
-        let assert = frond()
-            .args(&args)
-            .arg("--out")
-            .arg(&out)
-            .assert()
-            .failure();
-        let stderr = String::from_utf8_lossy(&assert.get_output().stderr).into_owned();
+        let stderr = failure_stderr(frond().arg(subcommand).arg(&photos).arg("--out").arg(&out));
         assert!(stderr.contains("holds 2 photos"), "{stderr}");
         assert!(stderr.contains("photos"), "{stderr}");
         assert!(!out.join("sfm/sparse").exists());
     }
     // densify and eval --dense name what is wrong with their inputs.
-    let assert = frond()
-        .args(["densify", "--max-image-size", "10"])
-        .arg(fixture("toy_scene"))
-        .arg("--out")
-        .arg(dir.path().join("dense"))
-        .assert()
-        .failure();
-    let stderr = String::from_utf8_lossy(&assert.get_output().stderr).into_owned();
-    assert!(stderr.contains("--max-image-size"), "{stderr}");
-    let assert = frond()
-        .args(["densify", "--block-size", "4"])
-        .arg(fixture("toy_scene"))
-        .arg("--out")
-        .arg(dir.path().join("dense"))
-        .assert()
-        .failure();
-    let stderr = String::from_utf8_lossy(&assert.get_output().stderr).into_owned();
-    assert!(stderr.contains("--block-size must be odd"), "{stderr}");
-    assert!(!dir.path().join("dense").exists());
-    let assert = frond()
-        .arg("eval")
-        .arg("--gt")
-        .arg(dir.path())
-        .arg("--dense")
-        .arg(fixture("toy_scene"))
-        .assert()
-        .failure();
-    let stderr = String::from_utf8_lossy(&assert.get_output().stderr).into_owned();
+    let dense = dir.path().join("dense");
+    for (option, value, message) in [
+        ("--max-image-size", "10", "--max-image-size"),
+        ("--block-size", "4", "--block-size must be odd"),
+    ] {
+        let stderr = failure_stderr(
+            frond()
+                .args(["densify", option, value])
+                .arg(fixture("toy_scene"))
+                .arg("--out")
+                .arg(&dense),
+        );
+        assert!(stderr.contains(message), "{stderr}");
+        assert!(!dense.exists());
+    }
+    let stderr = failure_stderr(
+        frond()
+            .arg("eval")
+            .arg("--gt")
+            .arg(dir.path())
+            .arg("--dense")
+            .arg(fixture("toy_scene")),
+    );
     assert!(stderr.contains("ground truth"), "{stderr}");
 }

@@ -10,6 +10,7 @@ use super::{BranchTree, GeneralizedCylinder, Spline};
 use crate::leaf::fit::{Affine2, LeafFrame};
 use crate::leaf::{LeafReconstruction, LeafTemplate};
 use crate::mesh::TriMesh;
+use crate::util::stats::median;
 
 /// A leaf base within this many radii of its branch's surface needs no petiole.
 const TOUCHING_RADII: f64 = 2.0;
@@ -74,12 +75,6 @@ pub struct Attachment {
     pub average: Option<AverageLeaf>,
     /// Leaves whose base already touches a branch.
     pub touching: usize,
-}
-
-fn median(mut values: Vec<f64>) -> Option<f64> {
-    values.retain(|v| v.is_finite());
-    values.sort_by(f64::total_cmp);
-    values.get(values.len() / 2).copied()
 }
 
 /// The template laid flat in a frame with its base at the origin, scaled to `length` and

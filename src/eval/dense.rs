@@ -10,6 +10,7 @@ use serde::Serialize;
 
 use super::{EvalError, GroundTruth, input_error};
 use crate::graph::shape::Shape;
+use crate::util::stats::quantile_sorted;
 
 /// How many points lie on the plant and how far from its surface.
 #[derive(Clone, Debug, Serialize)]
@@ -28,13 +29,6 @@ pub struct PointAccuracy {
     /// Different leaves with at least 20 points on them.
     pub leaves_covered: usize,
     pub leaves_total: usize,
-}
-
-fn quantile(sorted: &[f64], q: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    sorted[((sorted.len() - 1) as f64 * q).round() as usize]
 }
 
 /// Scores `points` (in the ground truth's frame) against the true surfaces.
@@ -96,7 +90,7 @@ pub fn point_accuracy(
             *per_leaf.entry(samples.leaf_ids[*sample]).or_insert(0usize) += 1;
         }
     }
-    let median = quantile(&errors, 0.5);
+    let median = quantile_sorted(&errors, 0.5);
     Ok(PointAccuracy {
         points: points.len(),
         plant_points: errors.len(),
@@ -104,7 +98,7 @@ pub fn point_accuracy(
         gate_fraction_of_height,
         plant_height: gt.plant_height,
         median_error: median,
-        p90_error: quantile(&errors, 0.9),
+        p90_error: quantile_sorted(&errors, 0.9),
         median_error_fraction_of_height: median / gt.plant_height,
         leaves_covered: per_leaf.values().filter(|&&n| n >= 20).count(),
         leaves_total: gt.leaves.len(),

@@ -6,7 +6,7 @@
 //! plant's vertical axis) are labelled per point; small isolated clusters are outliers. The pot
 //! stays in the foreground and is labelled later from its segments' shape.
 
-use nalgebra::{Matrix3, Point3, Vector3};
+use nalgebra::{Point3, Vector3};
 use serde::Serialize;
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
@@ -15,6 +15,7 @@ use super::components::Adjacency;
 use super::knn_pairs;
 use super::points::PointSet;
 use crate::scene::Reconstruction;
+use crate::util::geometry::closest_point_to_lines;
 use crate::util::rng::Rng;
 
 /// What a point was found to be before segmentation.
@@ -108,22 +109,6 @@ pub enum ForegroundError {
     NoPoints,
     #[error("no plant in front of the cameras: {0}")]
     NoPlant(String),
-}
-
-/// Least-squares point closest to all lines `(origin, unit direction)`.
-fn closest_point_to_lines(lines: &[(Point3<f64>, Vector3<f64>)]) -> Option<Point3<f64>> {
-    let mut a = Matrix3::zeros();
-    let mut b = Vector3::zeros();
-    for (origin, direction) in lines {
-        let projector = Matrix3::identity() - direction * direction.transpose();
-        a += projector;
-        b += projector * origin.coords;
-    }
-    let solved = a.try_inverse().map(|inv| inv * b)?;
-    solved
-        .iter()
-        .all(|c| c.is_finite())
-        .then(|| Point3::from(solved))
 }
 
 fn median(values: &mut [f64]) -> f64 {

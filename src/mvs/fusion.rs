@@ -10,7 +10,9 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::stereo::DepthMap;
+use crate::util::geometry::closest_point_to_lines;
 use crate::util::progress::Progress;
+use crate::util::stats::median;
 
 /// Fusion settings.
 #[derive(Clone, Copy, Debug, Serialize)]
@@ -64,26 +66,12 @@ impl RegionOfInterest {
         if centers_world.len() < 2 || radius_factor.is_nan() || radius_factor <= 0.0 {
             return None;
         }
-        let mut normal = nalgebra::Matrix3::zeros();
-        let mut rhs = Vector3::zeros();
-        for (c, d) in centers_world.iter().zip(axes_world) {
-            let d = d.normalize();
-            let projector = nalgebra::Matrix3::identity() - d * d.transpose();
-            normal += projector;
-            rhs += projector * c.coords;
-        }
-        // Nearly parallel axes leave the system ill-conditioned.
-        let eigen = normal.symmetric_eigen();
-        let (lo, hi) = eigen
-            .eigenvalues
+        let lines: Vec<_> = centers_world
             .iter()
-            .fold((f64::INFINITY, 0.0f64), |(lo, hi), &e| {
-                (lo.min(e), hi.max(e))
-            });
-        if lo.is_nan() || lo <= 1e-3 * hi {
-            return None;
-        }
-        let center_world = Point3::from(normal.try_inverse()? * rhs);
+            .copied()
+            .zip(axes_world.iter().copied())
+            .collect();
+        let center_world = closest_point_to_lines(&lines)?;
         let in_front = centers_world
             .iter()
             .zip(axes_world)
@@ -92,12 +80,9 @@ impl RegionOfInterest {
         if in_front * 4 < centers_world.len() * 3 {
             return None;
         }
-        let distances: Vec<f64> = centers_world
-            .iter()
-            .map(|c| (center_world - c).norm())
-            .collect();
-        let radius = radius_factor * median(distances)?;
-        (radius > 0.0 && center_world.iter().all(|c| c.is_finite())).then_some(Self {
+        let radius =
+            radius_factor * median(centers_world.iter().map(|c| (center_world - c).norm()))?;
+        (radius > 0.0).then_some(Self {
             center_world,
             radius,
         })
@@ -231,14 +216,6 @@ fn consistent_samples(
         }
     }
     (samples, out)
-}
-
-fn median(mut values: Vec<f64>) -> Option<f64> {
-    if values.is_empty() {
-        return None;
-    }
-    values.sort_by(f64::total_cmp);
-    Some(values[values.len() / 2])
 }
 
 /// Fuses depth maps into points (see the module docs). Deterministic.

@@ -318,10 +318,7 @@ fn match_one<'a>(
     let mut disparities = sparse_disparities(model, pair, &rectified, roi);
     // Slide the partner's window so that the sparse points' median disparity is 0: disparities
     // stay small next to the image width, and both windows show the same part of the scene.
-    let mut sorted = disparities.clone();
-    sorted.retain(|d| d.is_finite());
-    sorted.sort_by(f64::total_cmp);
-    if let Some(&median) = sorted.get(sorted.len() / 2) {
+    if let Some(median) = crate::util::stats::median(disparities.iter().copied()) {
         let shift = median.round();
         rectified.shift_partner_window(shift);
         for d in &mut disparities {

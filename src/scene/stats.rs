@@ -7,6 +7,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::{ImageFileStatus, ModelFormat, Scene, SceneSource};
+use crate::util::stats::quantile_sorted;
 
 #[derive(Clone, Debug, Serialize)]
 pub struct CameraSummary {
@@ -89,11 +90,6 @@ pub struct SceneSummary {
     pub reprojection: ReprojectionSummary,
     pub bounding_box: Option<BoundingBox>,
     pub dense: Option<DenseSummary>,
-}
-
-fn percentile(sorted: &[f64], q: f64) -> f64 {
-    let index = ((sorted.len() - 1) as f64 * q).round() as usize;
-    sorted[index.min(sorted.len() - 1)]
 }
 
 /// Computes the summary of a loaded scene.
@@ -240,8 +236,8 @@ fn bounding_box(model: &super::Reconstruction) -> Option<BoundingBox> {
         values.sort_by(f64::total_cmp);
         min[axis] = values[0];
         max[axis] = values[values.len() - 1];
-        robust_min[axis] = percentile(&values, 0.01);
-        robust_max[axis] = percentile(&values, 0.99);
+        robust_min[axis] = quantile_sorted(&values, 0.01);
+        robust_max[axis] = quantile_sorted(&values, 0.99);
     }
     Some(BoundingBox {
         min,

@@ -1,8 +1,11 @@
-//! Small shared utilities: atomic file output, deterministic random numbers, polygons.
+//! Small shared utilities: atomic file output, deterministic random numbers, polygons,
+//! order statistics, small geometric solvers.
 
 pub mod atomic;
+pub mod geometry;
 pub mod id_hash;
 pub mod polygon;
 pub mod polyline;
 pub mod progress;
 pub mod rng;
+pub mod stats;

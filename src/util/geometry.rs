@@ -1,0 +1,56 @@
+//! Small geometric solvers shared by the stages.
+
+use nalgebra::{Matrix3, Point3, Vector3};
+
+/// The least-squares point closest to all lines `(origin, direction)` (e.g. the point a
+/// ring of cameras looks at). `None` when the lines are (nearly) parallel, so that the
+/// system is ill-conditioned: smallest eigenvalue below 1e-3 of the largest.
+pub fn closest_point_to_lines(lines: &[(Point3<f64>, Vector3<f64>)]) -> Option<Point3<f64>> {
+    let mut normal = Matrix3::zeros();
+    let mut rhs = Vector3::zeros();
+    for (origin, direction) in lines {
+        let direction = direction.try_normalize(1e-12)?;
+        let projector = Matrix3::identity() - direction * direction.transpose();
+        normal += projector;
+        rhs += projector * origin.coords;
+    }
+    let eigenvalues = normal.symmetric_eigen().eigenvalues;
+    let (lo, hi) = eigenvalues
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(lo, hi), &e| {
+            (lo.min(e), hi.max(e))
+        });
+    if lo.is_nan() || lo <= 1e-3 * hi {
+        return None;
+    }
+    let solved = normal.try_inverse()? * rhs;
+    solved
+        .iter()
+        .all(|c| c.is_finite())
+        .then(|| Point3::from(solved))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crossing_lines_meet_and_parallel_lines_do_not() {
+        let target = Point3::new(1.0, 2.0, 3.0);
+        let lines: Vec<_> = [
+            Point3::new(5.0, 0.0, 0.0),
+            Point3::new(0.0, 6.0, 1.0),
+            Point3::new(-3.0, -1.0, 7.0),
+        ]
+        .into_iter()
+        .map(|o| (o, (target - o) * 2.0))
+        .collect();
+        let found = closest_point_to_lines(&lines).unwrap();
+        assert!((found - target).norm() < 1e-9);
+        let parallel: Vec<_> = (0..4)
+            .map(|k| (Point3::new(k as f64, 0.0, 0.0), Vector3::z()))
+            .collect();
+        assert!(closest_point_to_lines(&parallel).is_none());
+        assert!(closest_point_to_lines(&[]).is_none());
+    }
+}
