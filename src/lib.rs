@@ -22,6 +22,7 @@ pub mod edit;
 pub mod eval;
 pub mod graph;
 pub mod leaf;
+pub mod lod;
 pub mod mesh;
 pub mod model;
 pub mod mvs;

@@ -21,7 +21,7 @@ pub fn distance_to_mesh(p: &Point3<f32>, mesh: &TriMesh, spheres: &[(Point3<f32>
     best
 }
 
-fn bounding_spheres(mesh: &TriMesh) -> Vec<(Point3<f32>, f32)> {
+pub(crate) fn bounding_spheres(mesh: &TriMesh) -> Vec<(Point3<f32>, f32)> {
     (0..mesh.triangles.len())
         .map(|t| {
             let [a, b, c] = mesh.corners(t);

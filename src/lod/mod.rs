@@ -1,0 +1,5 @@
+//! Levels of detail for reconstructed plants (seeds 000, 002, 003): simplified levels,
+//! screen-space-error selection.
+
+pub mod select;
+pub mod simplify;
