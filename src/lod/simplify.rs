@@ -12,9 +12,6 @@
 //! survive; a border vertex only slides along its border. Collapses that would flip a face,
 //! make it degenerate or break manifoldness (the link condition) are refused.
 
-use std::cmp::Reverse;
-use std::collections::BinaryHeap;
-
 use nalgebra::{Point3, Vector3};
 use serde::Serialize;
 
@@ -116,8 +113,8 @@ struct Work {
     around: Vec<Vec<u32>>,
     quadrics: Vec<Quadric>,
     importance: Vec<f64>,
-    /// Bumped when a vertex's edge costs change (stale queue entries are skipped).
-    version: Vec<u32>,
+    /// Vertices on an open border (fixed: half-edge collapses keep the mesh manifold).
+    border: Vec<bool>,
 }
 
 impl Work {
@@ -149,12 +146,6 @@ impl Work {
             .count()
     }
 
-    fn is_border_vertex(&self, v: u32) -> bool {
-        self.neighbours(v)
-            .into_iter()
-            .any(|w| self.edge_triangles(v, w) == 1)
-    }
-
     /// Whether u→v may collapse.
     fn can_collapse(&self, u: u32, v: u32) -> bool {
         let shared = self.edge_triangles(u, v);
@@ -162,14 +153,30 @@ impl Work {
             return false;
         }
         // A border vertex only slides along its border.
-        if self.is_border_vertex(u) && shared != 1 {
+        if self.border[u as usize] && shared != 1 {
             return false;
         }
         // Link condition: the common neighbours are exactly the edge's opposite corners.
-        let nu = self.neighbours(u);
-        let nv = self.neighbours(v);
-        let common = nu.iter().filter(|w| nv.binary_search(w).is_ok()).count();
-        if common != shared {
+        let adjacent_to_v = |w: u32| {
+            self.around[v as usize]
+                .iter()
+                .any(|&t| self.triangles[t as usize].contains(&w))
+        };
+        let mut common = [u32::MAX; 3];
+        let mut common_count = 0;
+        for &t in &self.around[u as usize] {
+            for w in self.triangles[t as usize] {
+                if w == u || w == v || common[..common_count].contains(&w) || !adjacent_to_v(w) {
+                    continue;
+                }
+                if common_count == shared {
+                    return false;
+                }
+                common[common_count] = w;
+                common_count += 1;
+            }
+        }
+        if common_count != shared {
             return false;
         }
         // No face may flip or collapse to a sliver.
@@ -215,28 +222,124 @@ impl Work {
         let moved = self.quadrics[u as usize];
         self.quadrics[v as usize].add(&moved);
         self.importance[v as usize] = self.importance[v as usize].max(self.importance[u as usize]);
-        // Costs of edges at u and out of v changed (v's quadric grew); the others are checked
-        // for validity when popped.
-        self.version[u as usize] = self.version[u as usize].wrapping_add(1);
-        self.version[v as usize] = self.version[v as usize].wrapping_add(1);
     }
 }
 
-/// Queue entry: (cost bits, u, v, version of u, version of v); smallest cost first.
-type Entry = Reverse<(u64, u32, u32, u32, u32)>;
+/// Each vertex's cheapest collapse, in an indexed binary min-heap (updated in place, so no
+/// stale entries): ordered by (cost, vertex).
+struct CollapseQueue {
+    heap: Vec<u32>,
+    /// Position of each vertex in `heap`, or `ABSENT`.
+    position: Vec<u32>,
+    cost: Vec<f64>,
+    target: Vec<u32>,
+}
 
-fn push_candidates(work: &Work, v: u32, queue: &mut BinaryHeap<Entry>) {
-    for w in work.neighbours(v) {
-        for (a, b) in [(v, w), (w, v)] {
-            let cost = work.cost(a, b);
-            queue.push(Reverse((
-                cost.to_bits(),
-                a,
-                b,
-                work.version[a as usize],
-                work.version[b as usize],
-            )));
+const ABSENT: u32 = u32::MAX;
+
+impl CollapseQueue {
+    fn new(count: usize) -> Self {
+        Self {
+            heap: Vec::with_capacity(count),
+            position: vec![ABSENT; count],
+            cost: vec![0.0; count],
+            target: vec![0; count],
         }
+    }
+
+    fn less(&self, a: u32, b: u32) -> bool {
+        self.cost[a as usize]
+            .total_cmp(&self.cost[b as usize])
+            .then(a.cmp(&b))
+            .is_lt()
+    }
+
+    fn swap(&mut self, i: usize, j: usize) {
+        self.heap.swap(i, j);
+        self.position[self.heap[i] as usize] = i as u32;
+        self.position[self.heap[j] as usize] = j as u32;
+    }
+
+    fn sift_up(&mut self, mut i: usize) {
+        while i > 0 {
+            let parent = (i - 1) / 2;
+            if !self.less(self.heap[i], self.heap[parent]) {
+                break;
+            }
+            self.swap(i, parent);
+            i = parent;
+        }
+    }
+
+    fn sift_down(&mut self, mut i: usize) {
+        loop {
+            let (left, right) = (2 * i + 1, 2 * i + 2);
+            let mut smallest = i;
+            if left < self.heap.len() && self.less(self.heap[left], self.heap[smallest]) {
+                smallest = left;
+            }
+            if right < self.heap.len() && self.less(self.heap[right], self.heap[smallest]) {
+                smallest = right;
+            }
+            if smallest == i {
+                break;
+            }
+            self.swap(i, smallest);
+            i = smallest;
+        }
+    }
+
+    /// Inserts or updates vertex `u`'s collapse.
+    fn set(&mut self, u: u32, cost: f64, target: u32) {
+        self.cost[u as usize] = cost;
+        self.target[u as usize] = target;
+        let at = self.position[u as usize];
+        if at == ABSENT {
+            self.heap.push(u);
+            let last = self.heap.len() - 1;
+            self.position[u as usize] = last as u32;
+            self.sift_up(last);
+        } else {
+            self.sift_up(at as usize);
+            self.sift_down(self.position[u as usize] as usize);
+        }
+    }
+
+    fn remove(&mut self, u: u32) {
+        let at = self.position[u as usize];
+        if at == ABSENT {
+            return;
+        }
+        let at = at as usize;
+        let last = self.heap.len() - 1;
+        self.swap(at, last);
+        self.heap.pop();
+        self.position[u as usize] = ABSENT;
+        if at < self.heap.len() {
+            self.sift_up(at);
+            self.sift_down(self.position[self.heap[at] as usize] as usize);
+        }
+    }
+
+    /// The cheapest collapse (u, v), left in the queue.
+    fn peek(&self) -> Option<(u32, u32)> {
+        self.heap.first().map(|&u| (u, self.target[u as usize]))
+    }
+}
+
+/// Sets u's cheapest collapse target not in `skip` (validity is checked when it comes up),
+/// or removes u when it has none.
+fn queue_best(work: &Work, u: u32, skip: &[u32], queue: &mut CollapseQueue) {
+    // Corners of u's triangles (each neighbour once or twice; no allocation).
+    let best = work.around[u as usize]
+        .iter()
+        .flat_map(|&t| work.triangles[t as usize])
+        .filter(|&v| v != u && !skip.contains(&v))
+        .map(|v| (work.cost(u, v), v))
+        .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    match best {
+        Some((cost, v)) => queue.set(u, cost, v),
+        None => queue.remove(u),
     }
 }
 
@@ -271,7 +374,7 @@ pub fn simplify(mesh: &TriMesh, options: &SimplifyOptions) -> Result<Simplified,
         around: vec![Vec::new(); count],
         quadrics: vec![Quadric::default(); count],
         importance: vec![1.0; count],
-        version: vec![0; count],
+        border: vec![false; count],
         positions,
     };
     for (t, tri) in work.triangles.iter().enumerate() {
@@ -324,6 +427,8 @@ pub fn simplify(mesh: &TriMesh, options: &SimplifyOptions) -> Result<Simplified,
             if work.edge_triangles(a, b) != 1 {
                 continue;
             }
+            work.border[a as usize] = true;
+            work.border[b as usize] = true;
             let (pa, pb) = (work.positions[a as usize], work.positions[b as usize]);
             let edge = pb - pa;
             let Some(across) = edge.cross(&unit).try_normalize(1e-30) else {
@@ -336,29 +441,34 @@ pub fn simplify(mesh: &TriMesh, options: &SimplifyOptions) -> Result<Simplified,
     }
 
     let mut remaining = work.alive.iter().filter(|&&a| a).count();
-    let mut queue: BinaryHeap<Entry> = BinaryHeap::new();
-    for v in 0..count as u32 {
-        for w in work.neighbours(v) {
-            let cost = work.cost(v, w);
-            queue.push(Reverse((cost.to_bits(), v, w, 0, 0)));
-        }
-    }
+    let mut queue = CollapseQueue::new(count);
     let (mut collapses, mut refused) = (0usize, 0usize);
+    // Targets refused for each vertex since its neighbourhood last changed.
+    let mut skip: Vec<Vec<u32>> = vec![Vec::new(); count];
+    for u in 0..count as u32 {
+        queue_best(&work, u, &[], &mut queue);
+    }
     while remaining > options.target_triangles {
-        let Some(Reverse((_, u, v, version_u, version_v))) = queue.pop() else {
+        let Some((u, v)) = queue.peek() else {
             break;
         };
-        if work.version[u as usize] != version_u || work.version[v as usize] != version_v {
-            continue;
-        }
         if !work.can_collapse(u, v) {
             refused += 1;
+            skip[u as usize].push(v);
+            queue_best(&work, u, &skip[u as usize], &mut queue);
             continue;
         }
         remaining -= work.edge_triangles(u, v);
+        // Only u's ring changes: v's quadric grows and u's other neighbours lose u and gain v
+        // (the rest of v's ring keeps its candidates and their costs).
+        let ring = work.neighbours(u);
         work.collapse(u, v);
+        queue.remove(u);
         collapses += 1;
-        push_candidates(&work, v, &mut queue);
+        for w in ring {
+            skip[w as usize].clear();
+            queue_best(&work, w, &[], &mut queue);
+        }
     }
 
     // Compact: surviving triangles over the vertices they use, attributes carried over.
