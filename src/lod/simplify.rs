@@ -330,10 +330,19 @@ impl CollapseQueue {
 /// Sets u's cheapest collapse target not in `skip` (validity is checked when it comes up),
 /// or removes u when it has none.
 fn queue_best(work: &Work, u: u32, skip: &[u32], queue: &mut CollapseQueue) {
-    // Corners of u's triangles (each neighbour once or twice; no allocation).
+    // Around an interior vertex each neighbour follows u in exactly one triangle; a border
+    // vertex also needs the corners before it (no allocation either way).
+    let border = work.border[u as usize];
     let best = work.around[u as usize]
         .iter()
-        .flat_map(|&t| work.triangles[t as usize])
+        .flat_map(|&t| {
+            let tri = work.triangles[t as usize];
+            let k = tri.iter().position(|&w| w == u).unwrap_or(0);
+            let next = tri[(k + 1) % 3];
+            let previous = tri[(k + 2) % 3];
+            [Some(next), border.then_some(previous)]
+        })
+        .flatten()
         .filter(|&v| v != u && !skip.contains(&v))
         .map(|v| (work.cost(u, v), v))
         .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
