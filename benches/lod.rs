@@ -9,6 +9,7 @@ use std::time::Instant;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use frond::branch::CylinderMeshing;
 use frond::eval::geometry::symmetric_chamfer;
+use frond::lod::chain::{ChainOptions, build_chain};
 use frond::lod::simplify::{SimplifyOptions, simplify};
 use frond::mesh::TriMesh;
 use frond::synth::{Preset, generate_plant};
@@ -79,6 +80,18 @@ fn simplification(c: &mut Criterion) {
             100.0 * chamfer(&theirs) / extent,
         );
     }
+
+    let started = Instant::now();
+    let chain = build_chain(&mesh, &ChainOptions::default()).expect("chain");
+    println!(
+        "LOD chain in {:.3} s: {}",
+        started.elapsed().as_secs_f64(),
+        chain
+            .iter()
+            .map(|l| format!("{} triangles, μ {:.2e} m", l.triangles, l.error_world))
+            .collect::<Vec<_>>()
+            .join("; ")
+    );
 
     let mut group = c.benchmark_group("simplify_plant_to_10_percent");
     group.throughput(Throughput::Elements(triangles as u64));
