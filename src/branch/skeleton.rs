@@ -884,6 +884,17 @@ mod tests {
         out
     }
 
+    /// The default skeleton of points around a vertical axis through the origin.
+    fn skeleton_z_up(points: &[Point3<f64>]) -> (BranchTree, SkeletonStats) {
+        automatic_skeleton(
+            points,
+            &Vector3::z(),
+            &Point3::origin(),
+            &SkeletonOptions::default(),
+        )
+        .unwrap()
+    }
+
     #[test]
     fn a_stem_with_two_side_branches() {
         let mut rng = Rng::seed_from(3);
@@ -893,13 +904,7 @@ mod tests {
         let mut points = tube(&stem, 0.01, 10_000.0, &mut rng);
         points.extend(tube(&left, 0.004, 4_000.0, &mut rng));
         points.extend(tube(&right, 0.004, 4_000.0, &mut rng));
-        let (tree, stats) = automatic_skeleton(
-            &points,
-            &Vector3::z(),
-            &Point3::origin(),
-            &SkeletonOptions::default(),
-        )
-        .unwrap();
+        let (tree, stats) = skeleton_z_up(&points);
         assert_eq!(tree.branches.len(), 3, "{stats:?}");
         let main = &tree.branches[0];
         assert!(main.parent.is_none());
@@ -977,13 +982,7 @@ mod tests {
             points.extend(tube(&axis, 0.0035, DENSITY, &mut rng));
             petioles.push(axis);
         }
-        let (tree, stats) = automatic_skeleton(
-            &points,
-            &Vector3::z(),
-            &Point3::origin(),
-            &SkeletonOptions::default(),
-        )
-        .unwrap();
+        let (tree, stats) = skeleton_z_up(&points);
         // Outside the stem (radius 12 mm), how much of each petiole one branch follows to
         // within 2 of its radii (the eval's tolerance for such a branch).
         let covered: Vec<f64> = petioles

@@ -143,28 +143,10 @@ pub fn build_chain(mesh: &TriMesh, options: &ChainOptions) -> Result<Vec<LodLeve
 mod tests {
     use super::*;
     use crate::eval::geometry::{bounding_spheres, distance_to_mesh};
+    use crate::lod::test_meshes::grid;
 
     fn wavy_sheet(n: usize) -> TriMesh {
-        let mut mesh = TriMesh::default();
-        for j in 0..=n {
-            for i in 0..=n {
-                let (x, y) = (i as f32 / n as f32, j as f32 / n as f32);
-                mesh.positions
-                    .push(Point3::new(x, y, 0.1 * (4.0 * x).sin() * (3.0 * y).cos()));
-                mesh.uvs.push([x, y]);
-            }
-        }
-        let at = |i: usize, j: usize| (j * (n + 1) + i) as u32;
-        for j in 0..n {
-            for i in 0..n {
-                mesh.triangles
-                    .push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
-                mesh.triangles
-                    .push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
-            }
-        }
-        mesh.compute_normals();
-        mesh
+        grid(n, |x, y| 0.1 * (4.0 * x).sin() * (3.0 * y).cos())
     }
 
     #[test]

@@ -4,3 +4,33 @@
 pub mod chain;
 pub mod select;
 pub mod simplify;
+
+/// Meshes shared by the LOD tests.
+#[cfg(test)]
+pub(crate) mod test_meshes {
+    use crate::mesh::TriMesh;
+    use nalgebra::Point3;
+
+    /// An n×n grid of quads over [0, 1]², z = height(x, y), uv = (x, y).
+    pub fn grid(n: usize, height: impl Fn(f32, f32) -> f32) -> TriMesh {
+        let mut mesh = TriMesh::default();
+        for j in 0..=n {
+            for i in 0..=n {
+                let (x, y) = (i as f32 / n as f32, j as f32 / n as f32);
+                mesh.positions.push(Point3::new(x, y, height(x, y)));
+                mesh.uvs.push([x, y]);
+            }
+        }
+        let at = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+        for j in 0..n {
+            for i in 0..n {
+                mesh.triangles
+                    .push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
+                mesh.triangles
+                    .push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+            }
+        }
+        mesh.compute_normals();
+        mesh
+    }
+}

@@ -516,30 +516,8 @@ pub fn simplify(mesh: &TriMesh, options: &SimplifyOptions) -> Result<Simplified,
 mod tests {
     use super::*;
     use crate::eval::geometry::{bounding_spheres, distance_to_mesh};
+    use crate::lod::test_meshes::grid;
     use std::collections::HashMap;
-
-    /// An n×n grid of quads over [0, 1]², z = height(x, y).
-    fn grid(n: usize, height: impl Fn(f32, f32) -> f32) -> TriMesh {
-        let mut mesh = TriMesh::default();
-        for j in 0..=n {
-            for i in 0..=n {
-                let (x, y) = (i as f32 / n as f32, j as f32 / n as f32);
-                mesh.positions.push(Point3::new(x, y, height(x, y)));
-                mesh.uvs.push([x, y]);
-            }
-        }
-        let at = |i: usize, j: usize| (j * (n + 1) + i) as u32;
-        for j in 0..n {
-            for i in 0..n {
-                mesh.triangles
-                    .push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
-                mesh.triangles
-                    .push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
-            }
-        }
-        mesh.compute_normals();
-        mesh
-    }
 
     /// Each undirected edge's triangle count.
     fn edge_uses(mesh: &TriMesh) -> HashMap<(u32, u32), usize> {
