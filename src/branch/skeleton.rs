@@ -591,14 +591,15 @@ fn spread(node: &Node, points: &[Point3<f64>]) -> f64 {
 /// Where side branches leave a crowded base (a rosette's crown, a whorl), one geodesic level
 /// holds several branches at once: its pieces are wide and their centroids lie between the
 /// branches, so the chain wanders there, or it follows a neighbouring branch and leaves it
-/// with a kink. The base is cut after the last wide node (wider than 1.5× the median spread
-/// of the chain's outer half) or kink (a step turning more than 45° from the direction of
-/// the nodes beyond it; the step from the attachment point counts too), both looked for in
-/// the chain's inner half, and the branch's direction just past the cut is extended
-/// backwards to the axis it passes closest to: the parent's or an ancestor's, within 3 radii
-/// of it, at most the branch's kept length away and crossing it at 15° or more (a parallel
-/// neighbour is not where a branch starts; AdTree-like straight connection). `None` when the
-/// base is clean or no axis qualifies.
+/// with a kink. Looked for among the chain's inner-half nodes within 5 parent radii of the
+/// parent's axis: the base is cut after the last wide node (wider than 1.5× the median spread
+/// of the chain's outer half) or kink (a step turning more than 45° from the direction of the
+/// nodes beyond it; the step from the attachment point counts too). The branch's direction
+/// just past the cut is extended backwards to the axis it passes closest to, in that axis's
+/// radii: the parent's or an ancestor's, within 3 radii, at most the branch's kept length
+/// away and crossing it at 5° or more (AdTree-like straight connection). The straight base is
+/// kept only where the points support it (see the end of the function). `None` when the base
+/// is clean or no axis qualifies.
 fn reanchor_base(
     chain: &[usize],
     attachment: Option<Point3<f64>>,
@@ -701,7 +702,8 @@ fn reanchor_base(
     }
     let (_, anchor) = best?;
     // Keep the new base only where the points support it (a chord cutting a curved base
-    // does not) and it is better supported or much shorter than the path it replaces.
+    // does not): ≥ 80 % of its samples, and no fewer (within 0.05) than along the path it
+    // replaces; in a dense crown both are fully supported and the straight base wins.
     let parent_radius = branches[anchor.parent as usize]
         .cylinder
         .radius_at(anchor.fraction);
