@@ -408,7 +408,7 @@ pub fn automatic_skeleton(
         polyline.extend(smooth(
             &chain.iter().map(|&v| nodes[v].centroid).collect::<Vec<_>>(),
         ));
-        let length: f64 = polyline.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+        let length = crate::util::polyline::length(&polyline);
         // Spurs: too short, or ending within a few radii of the parent's axis (parts of a
         // thick stem's ring that lag behind in geodesic distance hug its surface).
         let hugs_parent = match (parent, parent_fraction, polyline.last()) {
@@ -623,13 +623,6 @@ fn reanchor_base(
     if chain.len() <= DIRECTION_NODES {
         return None;
     }
-    let spreads: Vec<f64> = chain.iter().map(|&v| spread(&nodes[v], points)).collect();
-    let mut outer = spreads[chain.len() / 2..].to_vec();
-    outer.sort_by(f64::total_cmp);
-    let reference = outer[outer.len() / 2];
-    if reference.is_nan() || reference <= 0.0 {
-        return None;
-    }
     // The crowded base lies near the parent: only nodes in the chain's inner half and
     // within CROWD_RADII parent radii of the parent's axis are looked at.
     let parent_axis = &branches[parent as usize].cylinder;
@@ -637,6 +630,16 @@ fn reanchor_base(
     let inner = (0..chain.len() / 2)
         .take_while(|&k| parent_axis.skeleton.distance_to(&nodes[chain[k]].centroid) <= crowd)
         .count();
+    if inner == 0 {
+        return None;
+    }
+    let spreads: Vec<f64> = chain.iter().map(|&v| spread(&nodes[v], points)).collect();
+    let mut outer = spreads[chain.len() / 2..].to_vec();
+    outer.sort_by(f64::total_cmp);
+    let reference = outer[outer.len() / 2];
+    if reference.is_nan() || reference <= 0.0 {
+        return None;
+    }
     let wide = (0..inner)
         .rev()
         .find(|&k| spreads[k] > WIDE * reference)
@@ -670,7 +673,7 @@ fn reanchor_base(
     }
     let origin = kept[0];
     let direction = (origin - kept[DIRECTION_NODES - 1]).try_normalize(1e-12)?;
-    let kept_length: f64 = kept.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+    let kept_length = crate::util::polyline::length(kept);
     let mut best: Option<(f64, Anchor)> = None;
     let mut candidate = Some(parent);
     while let Some(id) = candidate {

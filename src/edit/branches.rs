@@ -208,7 +208,7 @@ fn resample_stroke(stroke: &[[f64; 2]]) -> Result<Vec<Point2<f64>>, BranchEditEr
     if points.len() != stroke.len() {
         return Err(BranchEditError::InvalidStroke);
     }
-    let length: f64 = points.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+    let length = crate::util::polyline::length(&points);
     if points.len() < 2 || length < 1e-6 {
         return Err(BranchEditError::InvalidStroke);
     }
@@ -394,7 +394,7 @@ pub fn draw_in_world(
     {
         return Err(BranchEditError::InvalidStroke);
     }
-    let length: f64 = points.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+    let length = crate::util::polyline::length(&points);
     let step = (2.0 * snap.spacing).max(length / MAX_STROKE_SAMPLES as f64);
     let samples = resample(
         &points,

@@ -17,6 +17,7 @@ use super::points::PointSet;
 use crate::scene::Reconstruction;
 use crate::util::geometry::closest_point_to_lines;
 use crate::util::rng::Rng;
+use crate::util::stats::median;
 
 /// What a point was found to be before segmentation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
@@ -109,14 +110,6 @@ pub enum ForegroundError {
     NoPoints,
     #[error("no plant in front of the cameras: {0}")]
     NoPlant(String),
-}
-
-fn median(values: &mut [f64]) -> f64 {
-    if values.is_empty() {
-        return 0.0;
-    }
-    values.sort_by(f64::total_cmp);
-    values[values.len() / 2]
 }
 
 /// RANSAC for a dominant plane among `candidates`: hypotheses are least-squares planes through
@@ -224,21 +217,16 @@ pub fn separate_foreground(
                 / points.len() as f64,
         )
     });
-    let camera_distance = median(
-        &mut centers
-            .iter()
-            .map(|c| (c - look_at).norm())
-            .collect::<Vec<_>>(),
-    );
+    let camera_distance = median(centers.iter().map(|c| (c - look_at).norm())).unwrap_or(0.0);
 
     // Scale of the point spacing: median nearest-neighbour distance.
     let pairs = knn_pairs(points, 1);
     let spacing = median(
-        &mut pairs
+        pairs
             .iter()
-            .map(|&(a, b)| (points.positions[a as usize] - points.positions[b as usize]).norm())
-            .collect::<Vec<_>>(),
-    );
+            .map(|&(a, b)| (points.positions[a as usize] - points.positions[b as usize]).norm()),
+    )
+    .unwrap_or(0.0);
     let tolerance = (3.0 * spacing).max(0.004 * camera_distance);
     let mut rng = Rng::seed_from(options.seed);
     let n = points.len();
@@ -302,7 +290,7 @@ pub fn separate_foreground(
         let d = p - look_at;
         (d - up * up.dot(&d)).norm()
     };
-    let camera_radius = median(&mut centers.iter().map(horizontal).collect::<Vec<_>>());
+    let camera_radius = median(centers.iter().map(horizontal)).unwrap_or(0.0);
     let radius_limit = options.max_radius_fraction * camera_radius.max(1e-9);
     for (i, p) in points.positions.iter().enumerate() {
         if class[i] == PointClass::Plant && horizontal(p) > radius_limit {

@@ -165,7 +165,7 @@ impl LeafGeometry {
     /// Arc length of the (possibly bent) midrib.
     pub fn midrib_length(&self) -> f64 {
         let [_, _, midrib] = self.polylines(200);
-        midrib.windows(2).map(|w| (w[1] - w[0]).norm()).sum()
+        crate::util::polyline::length(&midrib)
     }
 
     /// Area of the flat blade, ∫ width(t) dt.

@@ -2,6 +2,11 @@
 
 use nalgebra::Point;
 
+/// Arc length of a polyline (0 for fewer than two points).
+pub fn length<const D: usize>(polyline: &[Point<f64, D>]) -> f64 {
+    polyline.windows(2).map(|w| (w[1] - w[0]).norm()).sum()
+}
+
 /// `n` points equally spaced in arc length along a polyline.
 pub fn resample<const D: usize>(polyline: &[Point<f64, D>], n: usize) -> Vec<Point<f64, D>> {
     if polyline.len() < 2 || n < 2 {
