@@ -11,6 +11,7 @@ use std::sync::mpsc;
 
 use image::RgbaImage;
 use nalgebra::{Isometry3, Matrix4, Point2, Point3, Vector3};
+use serde::Serialize;
 
 use crate::mesh::TriMesh;
 use crate::scene::{Camera, CameraModelKind};
@@ -41,6 +42,13 @@ pub enum RenderError {
 const COLOR_SAMPLES: u32 = 4;
 const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+/// Background of instanced frames (a pale sky, linear).
+const SKY: wgpu::Color = wgpu::Color {
+    r: 0.52,
+    g: 0.66,
+    b: 0.82,
+    a: 1.0,
+};
 
 /// A pinhole view: intrinsics in pixels (COLMAP convention), pose and clip planes.
 #[derive(Clone, Debug, PartialEq)]
@@ -175,11 +183,17 @@ impl Default for Lighting {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TextureHandle(usize);
 
+/// A handle to a mesh uploaded to a [`GpuScene`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct MeshHandle(usize);
+
 struct GpuMesh {
-    vertices: wgpu::Buffer,
-    indices: wgpu::Buffer,
+    /// Vertex and index buffers; `None` for an empty mesh.
+    buffers: Option<(wgpu::Buffer, wgpu::Buffer)>,
     index_count: u32,
     bind_group: wgpu::BindGroup,
+    /// Drawn once, untransformed, by every render (else only through instance batches).
+    is_static: bool,
 }
 
 /// Meshes and textures on the GPU, ready to render from any view.
@@ -193,10 +207,44 @@ impl GpuScene {
     pub fn num_meshes(&self) -> usize {
         self.meshes.len()
     }
+    /// Triangles of the static meshes (drawn by every render).
     pub fn num_triangles(&self) -> usize {
         self.triangles
     }
+    /// Triangles of one mesh.
+    pub fn mesh_triangles(&self, mesh: MeshHandle) -> usize {
+        self.meshes
+            .get(mesh.0)
+            .map_or(0, |m| m.index_count as usize / 3)
+    }
 }
+
+/// Model-to-world transform of one instance: a column-major 4×4 matrix (rotation, uniform
+/// scale and translation; normals are transformed by its upper 3×3 and renormalised).
+pub type InstanceTransform = [f32; 16];
+
+/// One instanced draw: `mesh` drawn once per transform in `instances` (a range into the
+/// transforms given to [`Renderer::render_instanced`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct InstanceBatch {
+    pub mesh: MeshHandle,
+    pub instances: std::ops::Range<u32>,
+}
+
+/// What one instanced frame cost.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct FrameStats {
+    pub draw_calls: usize,
+    pub instances: usize,
+    pub triangles: usize,
+    /// Wall-clock seconds from encoding to the GPU finishing the frame.
+    pub seconds: f64,
+}
+
+/// The identity instance transform.
+pub const IDENTITY_INSTANCE: InstanceTransform = [
+    1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
+];
 
 /// The headless renderer: device, pipelines and render targets of the last size used.
 pub struct Renderer {
@@ -210,6 +258,10 @@ pub struct Renderer {
     id_pipeline: wgpu::RenderPipeline,
     max_texture_side: u32,
     targets: Option<Targets>,
+    /// One identity transform, bound for static meshes.
+    identity_instance: wgpu::Buffer,
+    /// Per-frame instance transforms, grown on demand.
+    instance_buffer: Option<wgpu::Buffer>,
 }
 
 struct Targets {
@@ -259,6 +311,16 @@ fn mip_chain(image: &RgbaImage) -> Vec<RgbaImage> {
         levels.push(next);
     }
     levels
+}
+
+/// Bytes per instance transform.
+const INSTANCE_BYTES: u64 = 64;
+
+fn instance_bytes(transforms: &[InstanceTransform]) -> Vec<u8> {
+    transforms
+        .iter()
+        .flat_map(|m| m.iter().flat_map(|v| v.to_le_bytes()))
+        .collect()
 }
 
 fn padded_bytes_per_row(width: u32, bytes_per_pixel: u32) -> u32 {
@@ -370,6 +432,32 @@ impl Renderer {
                 },
             ],
         };
+        let instance_layout = wgpu::VertexBufferLayout {
+            array_stride: INSTANCE_BYTES,
+            step_mode: wgpu::VertexStepMode::Instance,
+            attributes: &[
+                wgpu::VertexAttribute {
+                    format: wgpu::VertexFormat::Float32x4,
+                    offset: 0,
+                    shader_location: 3,
+                },
+                wgpu::VertexAttribute {
+                    format: wgpu::VertexFormat::Float32x4,
+                    offset: 16,
+                    shader_location: 4,
+                },
+                wgpu::VertexAttribute {
+                    format: wgpu::VertexFormat::Float32x4,
+                    offset: 32,
+                    shader_location: 5,
+                },
+                wgpu::VertexAttribute {
+                    format: wgpu::VertexFormat::Float32x4,
+                    offset: 48,
+                    shader_location: 6,
+                },
+            ],
+        };
         let primitive = wgpu::PrimitiveState {
             topology: wgpu::PrimitiveTopology::TriangleList,
             front_face: wgpu::FrontFace::Ccw,
@@ -392,7 +480,7 @@ impl Renderer {
                         module: &shader,
                         entry_point: Some("vs_main"),
                         compilation_options: Default::default(),
-                        buffers: &[Some(vertex_layout.clone())],
+                        buffers: &[Some(vertex_layout.clone()), Some(instance_layout.clone())],
                     },
                     primitive,
                     depth_stencil: Some(depth_stencil.clone()),
@@ -451,7 +539,17 @@ impl Renderer {
             anisotropy_clamp: 1,
             ..Default::default()
         });
+        let identity_instance = {
+            use wgpu::util::DeviceExt;
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("identity instance"),
+                contents: &instance_bytes(&[IDENTITY_INSTANCE]),
+                usage: wgpu::BufferUsages::VERTEX,
+            })
+        };
         Ok(Self {
+            identity_instance,
+            instance_buffer: None,
             max_texture_side: limits.max_texture_dimension_2d,
             device,
             queue,
@@ -528,8 +626,9 @@ impl Renderer {
         TextureHandle(scene.textures.len() - 1)
     }
 
-    /// Uploads a mesh drawn with `texture`; `object_id` (non-zero) is what the id pass writes.
-    /// `alpha_test` discards texels with alpha below ½ (cut-out leaves, billboards).
+    /// Uploads a static mesh drawn with `texture` by every render; `object_id` (non-zero) is
+    /// what the id pass writes. `alpha_test` discards texels with alpha below ½ (cut-out
+    /// leaves, billboards).
     pub fn add_mesh(
         &self,
         scene: &mut GpuScene,
@@ -537,7 +636,31 @@ impl Renderer {
         texture: TextureHandle,
         object_id: u32,
         alpha_test: bool,
-    ) -> Result<(), RenderError> {
+    ) -> Result<MeshHandle, RenderError> {
+        self.upload_mesh(scene, mesh, texture, object_id, alpha_test, true)
+    }
+
+    /// Uploads a mesh drawn only through [`InstanceBatch`]es of [`Renderer::render_instanced`].
+    pub fn add_instanced_mesh(
+        &self,
+        scene: &mut GpuScene,
+        mesh: &TriMesh,
+        texture: TextureHandle,
+        object_id: u32,
+        alpha_test: bool,
+    ) -> Result<MeshHandle, RenderError> {
+        self.upload_mesh(scene, mesh, texture, object_id, alpha_test, false)
+    }
+
+    fn upload_mesh(
+        &self,
+        scene: &mut GpuScene,
+        mesh: &TriMesh,
+        texture: TextureHandle,
+        object_id: u32,
+        alpha_test: bool,
+        is_static: bool,
+    ) -> Result<MeshHandle, RenderError> {
         use wgpu::util::DeviceExt;
         if object_id == 0 {
             return Err(RenderError::Mesh {
@@ -547,9 +670,6 @@ impl Renderer {
         }
         mesh.validate()
             .map_err(|message| RenderError::Mesh { object_id, message })?;
-        if mesh.is_empty() {
-            return Ok(());
-        }
         let texture_view = scene
             .textures
             .get(texture.0)
@@ -557,25 +677,28 @@ impl Renderer {
                 object_id,
                 message: format!("unknown texture handle {}", texture.0),
             })?;
-        let vertices = self
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("vertices"),
-                contents: &vertex_bytes(mesh),
-                usage: wgpu::BufferUsages::VERTEX,
-            });
-        let index_data: Vec<u8> = mesh
-            .triangles
-            .iter()
-            .flat_map(|t| t.iter().flat_map(|i| i.to_le_bytes()))
-            .collect();
-        let indices = self
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("indices"),
-                contents: &index_data,
-                usage: wgpu::BufferUsages::INDEX,
-            });
+        let buffers = (!mesh.is_empty()).then(|| {
+            let vertices = self
+                .device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("vertices"),
+                    contents: &vertex_bytes(mesh),
+                    usage: wgpu::BufferUsages::VERTEX,
+                });
+            let index_data: Vec<u8> = mesh
+                .triangles
+                .iter()
+                .flat_map(|t| t.iter().flat_map(|i| i.to_le_bytes()))
+                .collect();
+            let indices = self
+                .device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("indices"),
+                    contents: &index_data,
+                    usage: wgpu::BufferUsages::INDEX,
+                });
+            (vertices, indices)
+        });
         let mut uniform = Vec::with_capacity(16);
         for v in [object_id, alpha_test as u32, 0, 0] {
             uniform.extend_from_slice(&v.to_le_bytes());
@@ -605,14 +728,16 @@ impl Renderer {
                 },
             ],
         });
-        scene.triangles += mesh.triangles.len();
+        if is_static {
+            scene.triangles += mesh.triangles.len();
+        }
         scene.meshes.push(GpuMesh {
-            vertices,
-            indices,
+            buffers,
             index_count: (mesh.triangles.len() * 3) as u32,
             bind_group,
+            is_static,
         });
-        Ok(())
+        Ok(MeshHandle(scene.meshes.len() - 1))
     }
 
     fn ensure_targets(&mut self, width: u32, height: u32) {
@@ -658,31 +783,9 @@ impl Renderer {
         });
     }
 
-    /// Renders `scene` from `camera`: colour, depth and object ids.
-    pub fn render(
-        &mut self,
-        scene: &GpuScene,
-        camera: &ViewCamera,
-        lighting: &Lighting,
-    ) -> Result<RenderOutput, RenderError> {
+    /// The view uniforms (clip transform, camera depth row, lighting) as a bind group.
+    fn view_bind_group(&self, camera: &ViewCamera, lighting: &Lighting) -> wgpu::BindGroup {
         use wgpu::util::DeviceExt;
-        let (width, height) = (camera.width, camera.height);
-        if width == 0
-            || height == 0
-            || width > self.max_texture_side
-            || height > self.max_texture_side
-        {
-            return Err(RenderError::Size {
-                width,
-                height,
-                limit: self.max_texture_side,
-            });
-        }
-        self.ensure_targets(width, height);
-        let Some(targets) = self.targets.as_ref() else {
-            return Err(RenderError::Readback("render targets missing".into()));
-        };
-
         let clip_from_world = camera.clip_from_camera() * camera.camera_from_world.to_homogeneous();
         let camera_matrix = camera.camera_from_world.to_homogeneous();
         let light = lighting.direction_world.normalize();
@@ -700,14 +803,227 @@ impl Renderer {
                 contents: &uniform_bytes,
                 usage: wgpu::BufferUsages::UNIFORM,
             });
-        let view_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("view"),
             layout: &self.view_layout,
             entries: &[wgpu::BindGroupEntry {
                 binding: 0,
                 resource: view_buffer.as_entire_binding(),
             }],
-        });
+        })
+    }
+
+    fn check_size(&self, width: u32, height: u32) -> Result<(), RenderError> {
+        if width == 0
+            || height == 0
+            || width > self.max_texture_side
+            || height > self.max_texture_side
+        {
+            return Err(RenderError::Size {
+                width,
+                height,
+                limit: self.max_texture_side,
+            });
+        }
+        Ok(())
+    }
+
+    /// Copies 4-byte-per-pixel `textures` into mapped buffers, submits `encoder` and returns
+    /// each texture's rows without padding.
+    fn submit_and_read(
+        &self,
+        mut encoder: wgpu::CommandEncoder,
+        textures: &[&wgpu::Texture],
+        width: u32,
+        height: u32,
+    ) -> Result<Vec<Vec<u8>>, RenderError> {
+        let row = padded_bytes_per_row(width, 4);
+        let buffers: Vec<wgpu::Buffer> = textures
+            .iter()
+            .map(|texture| {
+                let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("readback"),
+                    size: (row * height) as u64,
+                    usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+                    mapped_at_creation: false,
+                });
+                encoder.copy_texture_to_buffer(
+                    wgpu::TexelCopyTextureInfo {
+                        texture,
+                        mip_level: 0,
+                        origin: wgpu::Origin3d::ZERO,
+                        aspect: wgpu::TextureAspect::All,
+                    },
+                    wgpu::TexelCopyBufferInfo {
+                        buffer: &buffer,
+                        layout: wgpu::TexelCopyBufferLayout {
+                            offset: 0,
+                            bytes_per_row: Some(row),
+                            rows_per_image: Some(height),
+                        },
+                    },
+                    wgpu::Extent3d {
+                        width,
+                        height,
+                        depth_or_array_layers: 1,
+                    },
+                );
+                buffer
+            })
+            .collect();
+        self.queue.submit([encoder.finish()]);
+        let mut unpadded = Vec::with_capacity(buffers.len());
+        for buffer in &buffers {
+            let (sender, receiver) = mpsc::channel();
+            buffer.map_async(wgpu::MapMode::Read, .., move |result| {
+                let _ = sender.send(result);
+            });
+            self.device
+                .poll(wgpu::PollType::wait_indefinitely())
+                .map_err(|e| RenderError::Readback(e.to_string()))?;
+            receiver
+                .recv()
+                .map_err(|e| RenderError::Readback(e.to_string()))?
+                .map_err(|e| RenderError::Readback(e.to_string()))?;
+            let data = buffer
+                .get_mapped_range(..)
+                .map_err(|e| RenderError::Readback(format!("{e:?}")))?;
+            let mut out = Vec::with_capacity((width * height * 4) as usize);
+            for y in 0..height as usize {
+                let start = y * row as usize;
+                out.extend_from_slice(&data[start..start + (width * 4) as usize]);
+            }
+            drop(data);
+            buffer.unmap();
+            unpadded.push(out);
+        }
+        Ok(unpadded)
+    }
+
+    /// Renders one colour frame of the static meshes plus instance `batches` (ranges into
+    /// `transforms`), waits for the GPU to finish and reports what was drawn and how long it
+    /// took. With `read_color` the frame is also read back (not included in the time).
+    pub fn render_instanced(
+        &mut self,
+        scene: &GpuScene,
+        camera: &ViewCamera,
+        lighting: &Lighting,
+        transforms: &[InstanceTransform],
+        batches: &[InstanceBatch],
+        read_color: bool,
+    ) -> Result<(FrameStats, Option<RgbaImage>), RenderError> {
+        let (width, height) = (camera.width, camera.height);
+        self.check_size(width, height)?;
+        if let Some(batch) = batches.iter().find(|b| {
+            b.instances.end as usize > transforms.len() || b.instances.start > b.instances.end
+        }) {
+            return Err(RenderError::Mesh {
+                object_id: 0,
+                message: format!(
+                    "instance range {:?} outside the {} transforms",
+                    batch.instances,
+                    transforms.len()
+                ),
+            });
+        }
+        self.ensure_targets(width, height);
+        let start = std::time::Instant::now();
+        let needed = (transforms.len().max(1) as u64) * INSTANCE_BYTES;
+        if self
+            .instance_buffer
+            .as_ref()
+            .is_none_or(|b| b.size() < needed)
+        {
+            self.instance_buffer = Some(self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("instances"),
+                size: needed.next_power_of_two(),
+                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }));
+        }
+        let (Some(targets), Some(instance_buffer)) =
+            (self.targets.as_ref(), self.instance_buffer.as_ref())
+        else {
+            return Err(RenderError::Readback("render targets missing".into()));
+        };
+        if !transforms.is_empty() {
+            self.queue
+                .write_buffer(instance_buffer, 0, &instance_bytes(transforms));
+        }
+        let view_group = self.view_bind_group(camera, lighting);
+        let mut encoder = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("instanced frame"),
+            });
+        let resolved_view = targets
+            .color_resolved
+            .create_view(&wgpu::TextureViewDescriptor::default());
+        let mut stats = FrameStats::default();
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("instanced colour"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &targets.color_msaa,
+                    depth_slice: None,
+                    resolve_target: Some(&resolved_view),
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(SKY),
+                        store: wgpu::StoreOp::Discard,
+                    },
+                })],
+                depth_stencil_attachment: Some(cleared_depth(&targets.depth_msaa)),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            let (draws, triangles) = draw_meshes(
+                &mut pass,
+                &self.color_pipeline,
+                &view_group,
+                scene,
+                &self.identity_instance,
+            );
+            let (batch_draws, instances, batch_triangles) =
+                draw_batches(&mut pass, scene, instance_buffer, batches);
+            stats.draw_calls = draws + batch_draws;
+            stats.instances = instances;
+            stats.triangles = triangles + batch_triangles;
+        }
+        self.queue.submit([encoder.finish()]);
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| RenderError::Readback(e.to_string()))?;
+        stats.seconds = start.elapsed().as_secs_f64();
+        if !read_color {
+            return Ok((stats, None));
+        }
+        let encoder = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("frame readback"),
+            });
+        let mut bytes = self.submit_and_read(encoder, &[&targets.color_resolved], width, height)?;
+        let color = RgbaImage::from_raw(width, height, bytes.pop().unwrap_or_default())
+            .ok_or_else(|| RenderError::Readback("colour buffer has the wrong size".into()))?;
+        Ok((stats, Some(color)))
+    }
+
+    /// Renders `scene` from `camera`: colour, depth and object ids.
+    pub fn render(
+        &mut self,
+        scene: &GpuScene,
+        camera: &ViewCamera,
+        lighting: &Lighting,
+    ) -> Result<RenderOutput, RenderError> {
+        let (width, height) = (camera.width, camera.height);
+        self.check_size(width, height)?;
+        self.ensure_targets(width, height);
+        let Some(targets) = self.targets.as_ref() else {
+            return Err(RenderError::Readback("render targets missing".into()));
+        };
+
+        let view_group = self.view_bind_group(camera, lighting);
 
         let mut encoder = self
             .device
@@ -739,7 +1055,13 @@ impl Renderer {
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            draw_meshes(&mut pass, &self.color_pipeline, &view_group, scene);
+            draw_meshes(
+                &mut pass,
+                &self.color_pipeline,
+                &view_group,
+                scene,
+                &self.identity_instance,
+            );
         }
         let id_view = targets
             .id
@@ -773,71 +1095,20 @@ impl Renderer {
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            draw_meshes(&mut pass, &self.id_pipeline, &view_group, scene);
-        }
-        let readbacks = [
-            (&targets.color_resolved, 4u32),
-            (&targets.id, 4),
-            (&targets.linear_depth, 4),
-        ]
-        .map(|(texture, bytes_per_pixel)| {
-            let row = padded_bytes_per_row(width, bytes_per_pixel);
-            let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("readback"),
-                size: (row * height) as u64,
-                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-                mapped_at_creation: false,
-            });
-            encoder.copy_texture_to_buffer(
-                wgpu::TexelCopyTextureInfo {
-                    texture,
-                    mip_level: 0,
-                    origin: wgpu::Origin3d::ZERO,
-                    aspect: wgpu::TextureAspect::All,
-                },
-                wgpu::TexelCopyBufferInfo {
-                    buffer: &buffer,
-                    layout: wgpu::TexelCopyBufferLayout {
-                        offset: 0,
-                        bytes_per_row: Some(row),
-                        rows_per_image: Some(height),
-                    },
-                },
-                wgpu::Extent3d {
-                    width,
-                    height,
-                    depth_or_array_layers: 1,
-                },
+            draw_meshes(
+                &mut pass,
+                &self.id_pipeline,
+                &view_group,
+                scene,
+                &self.identity_instance,
             );
-            (buffer, row)
-        });
-        self.queue.submit([encoder.finish()]);
-
-        let mut unpadded: Vec<Vec<u8>> = Vec::with_capacity(3);
-        for (buffer, row) in &readbacks {
-            let (sender, receiver) = mpsc::channel();
-            buffer.map_async(wgpu::MapMode::Read, .., move |result| {
-                let _ = sender.send(result);
-            });
-            self.device
-                .poll(wgpu::PollType::wait_indefinitely())
-                .map_err(|e| RenderError::Readback(e.to_string()))?;
-            receiver
-                .recv()
-                .map_err(|e| RenderError::Readback(e.to_string()))?
-                .map_err(|e| RenderError::Readback(e.to_string()))?;
-            let data = buffer
-                .get_mapped_range(..)
-                .map_err(|e| RenderError::Readback(format!("{e:?}")))?;
-            let mut out = Vec::with_capacity((width * height * 4) as usize);
-            for y in 0..height as usize {
-                let start = y * *row as usize;
-                out.extend_from_slice(&data[start..start + (width * 4) as usize]);
-            }
-            drop(data);
-            buffer.unmap();
-            unpadded.push(out);
         }
+        let mut unpadded = self.submit_and_read(
+            encoder,
+            &[&targets.color_resolved, &targets.id, &targets.linear_depth],
+            width,
+            height,
+        )?;
         let depth_bytes = unpadded.pop().unwrap_or_default();
         let id_bytes = unpadded.pop().unwrap_or_default();
         let color_bytes = unpadded.pop().unwrap_or_default();
@@ -873,21 +1144,63 @@ fn cleared_depth(view: &wgpu::TextureView) -> wgpu::RenderPassDepthStencilAttach
     }
 }
 
-/// Draws every mesh of the scene with one pipeline and the view's bind group.
+/// Draws every static mesh of the scene with one pipeline and the view's bind group; returns
+/// the draw calls and triangles submitted.
 fn draw_meshes(
     pass: &mut wgpu::RenderPass<'_>,
     pipeline: &wgpu::RenderPipeline,
     view_group: &wgpu::BindGroup,
     scene: &GpuScene,
-) {
+    identity_instance: &wgpu::Buffer,
+) -> (usize, usize) {
     pass.set_pipeline(pipeline);
     pass.set_bind_group(0, view_group, &[]);
-    for mesh in &scene.meshes {
+    pass.set_vertex_buffer(1, identity_instance.slice(..));
+    let mut draws = (0, 0);
+    for mesh in scene.meshes.iter().filter(|m| m.is_static) {
+        let Some((vertices, indices)) = &mesh.buffers else {
+            continue;
+        };
         pass.set_bind_group(1, &mesh.bind_group, &[]);
-        pass.set_vertex_buffer(0, mesh.vertices.slice(..));
-        pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+        pass.set_vertex_buffer(0, vertices.slice(..));
+        pass.set_index_buffer(indices.slice(..), wgpu::IndexFormat::Uint32);
         pass.draw_indexed(0..mesh.index_count, 0, 0..1);
+        draws.0 += 1;
+        draws.1 += mesh.index_count as usize / 3;
     }
+    draws
+}
+
+/// Draws instance batches (the instance transforms bound at slot 1); returns the draw calls,
+/// instances and triangles submitted.
+fn draw_batches(
+    pass: &mut wgpu::RenderPass<'_>,
+    scene: &GpuScene,
+    instance_buffer: &wgpu::Buffer,
+    batches: &[InstanceBatch],
+) -> (usize, usize, usize) {
+    pass.set_vertex_buffer(1, instance_buffer.slice(..));
+    let mut totals = (0, 0, 0);
+    for batch in batches {
+        let Some(mesh) = scene.meshes.get(batch.mesh.0) else {
+            continue;
+        };
+        let Some((vertices, indices)) = &mesh.buffers else {
+            continue;
+        };
+        if batch.instances.is_empty() {
+            continue;
+        }
+        pass.set_bind_group(1, &mesh.bind_group, &[]);
+        pass.set_vertex_buffer(0, vertices.slice(..));
+        pass.set_index_buffer(indices.slice(..), wgpu::IndexFormat::Uint32);
+        pass.draw_indexed(0..mesh.index_count, 0, batch.instances.clone());
+        let count = batch.instances.len();
+        totals.0 += 1;
+        totals.1 += count;
+        totals.2 += count * mesh.index_count as usize / 3;
+    }
+    totals
 }
 
 #[cfg(test)]
@@ -1058,6 +1371,98 @@ mod tests {
             "{pixel:?}"
         );
         assert_eq!(out.color.get_pixel(0, 0)[0], 0);
+    }
+
+    /// Column-major transform: uniform `scale`, rotation about z by `yaw`, then `offset`.
+    fn instance(offset: Vector3<f32>, yaw: f32, scale: f32) -> InstanceTransform {
+        let m = nalgebra::Similarity3::new(offset, Vector3::z() * yaw, scale).to_homogeneous();
+        let mut out = [0.0; 16];
+        out.copy_from_slice(m.as_slice());
+        out
+    }
+
+    #[test]
+    fn an_instance_draws_what_the_transformed_static_mesh_draws() {
+        let mut renderer = renderer();
+        let view = camera(160, 120);
+        let texture_image = RgbaImage::from_fn(8, 8, |x, y| {
+            image::Rgba([30 * x as u8, 30 * y as u8, 90, 255])
+        });
+        let (offset, yaw, scale) = (Vector3::new(0.15f32, -0.05, 0.1), 0.6f32, 1.3f32);
+        let local = square_at(Point3::origin(), 0.25);
+        let transform = instance(offset, yaw, scale);
+        let mut placed = local.clone();
+        let similarity = nalgebra::Similarity3::new(offset, Vector3::z() * yaw, scale);
+        for p in &mut placed.positions {
+            *p = similarity.transform_point(p);
+        }
+        placed.compute_normals();
+
+        let mut static_scene = renderer.new_scene();
+        let t = renderer.add_texture(&mut static_scene, &texture_image);
+        renderer
+            .add_mesh(&mut static_scene, &placed, t, 1, false)
+            .unwrap();
+        let (static_stats, static_color) = renderer
+            .render_instanced(&static_scene, &view, &Lighting::default(), &[], &[], true)
+            .unwrap();
+        assert_eq!((static_stats.draw_calls, static_stats.triangles), (1, 2));
+
+        let mut instanced_scene = renderer.new_scene();
+        let t = renderer.add_texture(&mut instanced_scene, &texture_image);
+        let mesh = renderer
+            .add_instanced_mesh(&mut instanced_scene, &local, t, 1, false)
+            .unwrap();
+        // A second instance far behind the camera draws nothing visible.
+        let transforms = [transform, instance(Vector3::new(0.0, -50.0, 0.0), 0.0, 1.0)];
+        let batches = [InstanceBatch {
+            mesh,
+            instances: 0..2,
+        }];
+        let (stats, color) = renderer
+            .render_instanced(
+                &instanced_scene,
+                &view,
+                &Lighting::default(),
+                &transforms,
+                &batches,
+                true,
+            )
+            .unwrap();
+        assert_eq!(
+            (stats.draw_calls, stats.instances, stats.triangles),
+            (1, 2, 4)
+        );
+        let (a, b) = (static_color.unwrap(), color.unwrap());
+        let sky = *a.get_pixel(0, 0);
+        let covered = a.pixels().filter(|p| **p != sky).count();
+        let differing = a
+            .pixels()
+            .zip(b.pixels())
+            .filter(|(p, q)| (0..3).any(|c| p[c].abs_diff(q[c]) > 8))
+            .count();
+        assert!(covered > 1000, "square covers {covered} pixels");
+        assert!(
+            differing * 100 < covered,
+            "{differing} of {covered} pixels differ"
+        );
+
+        let bad = [InstanceBatch {
+            mesh,
+            instances: 1..3,
+        }];
+        assert!(
+            renderer
+                .render_instanced(
+                    &instanced_scene,
+                    &view,
+                    &Lighting::default(),
+                    &transforms,
+                    &bad,
+                    false
+                )
+                .is_err()
+        );
     }
 
     #[test]

@@ -27,6 +27,11 @@ struct VertexIn {
     @location(0) position: vec3<f32>,
     @location(1) normal: vec3<f32>,
     @location(2) uv: vec2<f32>,
+    // Model-to-world transform of the instance (identity for static meshes), by columns.
+    @location(3) model_0: vec4<f32>,
+    @location(4) model_1: vec4<f32>,
+    @location(5) model_2: vec4<f32>,
+    @location(6) model_3: vec4<f32>,
 };
 
 struct VertexOut {
@@ -39,9 +44,10 @@ struct VertexOut {
 @vertex
 fn vs_main(in: VertexIn) -> VertexOut {
     var out: VertexOut;
-    let world = vec4<f32>(in.position, 1.0);
+    let model = mat4x4<f32>(in.model_0, in.model_1, in.model_2, in.model_3);
+    let world = model * vec4<f32>(in.position, 1.0);
     out.clip = view.clip_from_world * world;
-    out.normal = in.normal;
+    out.normal = (model * vec4<f32>(in.normal, 0.0)).xyz;
     out.uv = in.uv;
     out.depth = dot(view.camera_z_from_world, world);
     return out;
