@@ -1,6 +1,8 @@
 //! Levels of detail for reconstructed plants (seeds 000, 002, 003): simplified levels,
 //! screen-space-error selection.
 
+pub mod asset;
+pub mod billboard;
 pub mod chain;
 pub mod select;
 pub mod simplify;

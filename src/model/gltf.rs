@@ -120,120 +120,249 @@ fn png_bytes(image: &RgbaImage) -> Vec<u8> {
     out
 }
 
-/// Encodes nodes as a glb; `textures` are embedded once each as PNG.
-pub fn write_glb(nodes: &[ExportNode<'_>], textures: &[&RgbaImage], generator: &str) -> Vec<u8> {
-    let mut buffer = BinaryBuffer {
-        bytes: Vec::new(),
-        views: Vec::new(),
-        accessors: Vec::new(),
-    };
-    let mut meshes = Vec::new();
-    let mut materials = Vec::new();
-    let mut gltf_textures = Vec::new();
-    let mut images = Vec::new();
-    let mut gltf_nodes = Vec::new();
-    for texture in textures {
-        let view = buffer.view(&png_bytes(texture), None);
-        images.push(json!({"bufferView": view, "mimeType": "image/png"}));
-        gltf_textures.push(json!({"source": images.len() - 1, "sampler": 0}));
-    }
-    for node in nodes {
-        let mesh = node.mesh;
-        if mesh.is_empty() {
-            continue;
-        }
-        let positions: Vec<f32> = mesh
-            .positions
-            .iter()
-            .flat_map(|p| [p.x, p.y, p.z])
-            .collect();
-        let normals: Vec<f32> = mesh.normals.iter().flat_map(|n| [n.x, n.y, n.z]).collect();
-        let uvs: Vec<f32> = mesh.uvs.iter().flat_map(|uv| [uv[0], uv[1]]).collect();
-        let position = buffer.accessor_f32(&positions, 3, true);
-        let normal = buffer.accessor_f32(&normals, 3, false);
-        let uv = buffer.accessor_f32(&uvs, 2, false);
-        let indices = buffer.accessor_indices(&mesh.triangles);
-        let mut material = json!({
-            "name": format!("{}_material", node.name),
-            "doubleSided": node.double_sided,
-            "pbrMetallicRoughness": {
-                "baseColorFactor": node.color,
-                "metallicFactor": 0.0,
-                "roughnessFactor": 0.85
-            }
-        });
-        if let Some(texture) = node.texture.filter(|&t| t < gltf_textures.len()) {
-            material["pbrMetallicRoughness"]["baseColorTexture"] = json!({"index": texture});
-            material["pbrMetallicRoughness"]["baseColorFactor"] = json!([1.0, 1.0, 1.0, 1.0]);
-        }
-        materials.push(material);
-        meshes.push(json!({
-            "name": node.name,
-            "primitives": [{
-                "attributes": {"POSITION": position, "NORMAL": normal, "TEXCOORD_0": uv},
-                "indices": indices,
-                "material": materials.len() - 1,
-                "mode": 4
-            }]
-        }));
-        gltf_nodes.push(json!({"name": node.name, "mesh": meshes.len() - 1}));
-    }
-    buffer.align();
-    let mut document = json!({
-        "asset": {"version": "2.0", "generator": generator},
-        "scene": 0,
-        "scenes": [{"name": "plant", "nodes": (0..gltf_nodes.len()).collect::<Vec<_>>()}],
-        "nodes": gltf_nodes,
-    });
-    if !meshes.is_empty() {
-        document["meshes"] = json!(meshes);
-        document["materials"] = json!(materials);
-        document["accessors"] = json!(buffer.accessors);
-        document["bufferViews"] = json!(buffer.views);
-        document["buffers"] = json!([{"byteLength": buffer.bytes.len()}]);
-    }
-    if !gltf_textures.is_empty() {
-        document["textures"] = json!(gltf_textures);
-        document["images"] = json!(images);
-        document["samplers"] =
-            json!([{"magFilter": 9729, "minFilter": 9987, "wrapS": 10497, "wrapT": 10497}]);
-    }
-    let mut json_bytes = serde_json::to_vec(&document).unwrap_or_default();
-    while !json_bytes.len().is_multiple_of(4) {
-        json_bytes.push(b' ');
-    }
-    let has_bin = !buffer.bytes.is_empty();
-    let total = 12 + 8 + json_bytes.len() + if has_bin { 8 + buffer.bytes.len() } else { 0 };
-    let mut out = Vec::with_capacity(total);
-    for v in [
-        GLB_MAGIC,
-        2,
-        total as u32,
-        json_bytes.len() as u32,
-        CHUNK_JSON,
-    ] {
-        out.extend_from_slice(&v.to_le_bytes());
-    }
-    out.extend_from_slice(&json_bytes);
-    if has_bin {
-        out.extend_from_slice(&(buffer.bytes.len() as u32).to_le_bytes());
-        out.extend_from_slice(&CHUNK_BIN.to_le_bytes());
-        out.extend_from_slice(&buffer.bytes);
-    }
-    out
+/// A triangle primitive to write: a mesh and its material.
+pub struct PrimitiveSpec<'a> {
+    pub mesh: &'a TriMesh,
+    /// Index of a texture added with [`GlbBuilder::add_texture`].
+    pub texture: Option<usize>,
+    /// Base colour (linear RGBA; multiplied with the texture).
+    pub color: [f32; 4],
+    pub double_sided: bool,
+    /// Cut-out transparency (`alphaMode: MASK`, cutoff ½).
+    pub alpha_mask: bool,
 }
 
-/// Reads every named node's triangle mesh from glb bytes, transformed to world coordinates.
-pub fn read_glb_meshes(bytes: &[u8], path: &Path) -> Result<Vec<NamedMesh>, GltfError> {
-    let invalid = |message: String| GltfError::Invalid {
+/// Builds a glTF 2.0 binary: textures (embedded PNG), meshes of several primitives, nodes
+/// (any JSON, e.g. with extensions) and the scene's root nodes.
+pub struct GlbBuilder {
+    generator: String,
+    buffer: BinaryBuffer,
+    meshes: Vec<Value>,
+    materials: Vec<Value>,
+    textures: Vec<Value>,
+    images: Vec<Value>,
+    nodes: Vec<Value>,
+    scene_nodes: Vec<usize>,
+    extensions_used: Vec<String>,
+}
+
+impl GlbBuilder {
+    pub fn new(generator: &str) -> Self {
+        Self {
+            generator: generator.to_owned(),
+            buffer: BinaryBuffer {
+                bytes: Vec::new(),
+                views: Vec::new(),
+                accessors: Vec::new(),
+            },
+            meshes: Vec::new(),
+            materials: Vec::new(),
+            textures: Vec::new(),
+            images: Vec::new(),
+            nodes: Vec::new(),
+            scene_nodes: Vec::new(),
+            extensions_used: Vec::new(),
+        }
+    }
+
+    /// Embeds an image as PNG; returns its texture index.
+    pub fn add_texture(&mut self, image: &RgbaImage) -> usize {
+        let view = self.buffer.view(&png_bytes(image), None);
+        self.images
+            .push(json!({"bufferView": view, "mimeType": "image/png"}));
+        self.textures
+            .push(json!({"source": self.images.len() - 1, "sampler": 0}));
+        self.textures.len() - 1
+    }
+
+    /// Adds a mesh of the non-empty primitives; `None` when all are empty.
+    pub fn add_mesh(&mut self, name: &str, primitives: &[PrimitiveSpec<'_>]) -> Option<usize> {
+        let mut written = Vec::new();
+        for (k, primitive) in primitives.iter().enumerate() {
+            let mesh = primitive.mesh;
+            if mesh.is_empty() {
+                continue;
+            }
+            let positions: Vec<f32> = mesh
+                .positions
+                .iter()
+                .flat_map(|p| [p.x, p.y, p.z])
+                .collect();
+            let normals: Vec<f32> = mesh.normals.iter().flat_map(|n| [n.x, n.y, n.z]).collect();
+            let uvs: Vec<f32> = mesh.uvs.iter().flat_map(|uv| [uv[0], uv[1]]).collect();
+            let position = self.buffer.accessor_f32(&positions, 3, true);
+            let normal = self.buffer.accessor_f32(&normals, 3, false);
+            let uv = self.buffer.accessor_f32(&uvs, 2, false);
+            let indices = self.buffer.accessor_indices(&mesh.triangles);
+            let material_name = if primitives.len() == 1 {
+                format!("{name}_material")
+            } else {
+                format!("{name}_material_{k}")
+            };
+            let mut material = json!({
+                "name": material_name,
+                "doubleSided": primitive.double_sided,
+                "pbrMetallicRoughness": {
+                    "baseColorFactor": primitive.color,
+                    "metallicFactor": 0.0,
+                    "roughnessFactor": 0.85
+                }
+            });
+            if let Some(texture) = primitive.texture.filter(|&t| t < self.textures.len()) {
+                material["pbrMetallicRoughness"]["baseColorTexture"] = json!({"index": texture});
+            }
+            if primitive.alpha_mask {
+                material["alphaMode"] = json!("MASK");
+                material["alphaCutoff"] = json!(0.5);
+            }
+            self.materials.push(material);
+            written.push(json!({
+                "attributes": {"POSITION": position, "NORMAL": normal, "TEXCOORD_0": uv},
+                "indices": indices,
+                "material": self.materials.len() - 1,
+                "mode": 4
+            }));
+        }
+        if written.is_empty() {
+            return None;
+        }
+        self.meshes
+            .push(json!({"name": name, "primitives": written}));
+        Some(self.meshes.len() - 1)
+    }
+
+    /// Adds a node (a JSON object: name, mesh, extensions, extras …); returns its index.
+    pub fn add_node(&mut self, node: Value) -> usize {
+        self.nodes.push(node);
+        self.nodes.len() - 1
+    }
+
+    /// Makes `node` a root of the scene.
+    pub fn add_to_scene(&mut self, node: usize) {
+        self.scene_nodes.push(node);
+    }
+
+    /// Declares an extension in `extensionsUsed`.
+    pub fn use_extension(&mut self, name: &str) {
+        if !self.extensions_used.iter().any(|e| e == name) {
+            self.extensions_used.push(name.to_owned());
+        }
+    }
+
+    /// The glb bytes.
+    pub fn finish(mut self) -> Vec<u8> {
+        self.buffer.align();
+        let mut document = json!({
+            "asset": {"version": "2.0", "generator": self.generator},
+            "scene": 0,
+            "scenes": [{"name": "plant", "nodes": self.scene_nodes}],
+            "nodes": self.nodes,
+        });
+        if !self.extensions_used.is_empty() {
+            document["extensionsUsed"] = json!(self.extensions_used);
+        }
+        if !self.meshes.is_empty() {
+            document["meshes"] = json!(self.meshes);
+            document["materials"] = json!(self.materials);
+            document["accessors"] = json!(self.buffer.accessors);
+        }
+        if !self.buffer.bytes.is_empty() {
+            document["bufferViews"] = json!(self.buffer.views);
+            document["buffers"] = json!([{"byteLength": self.buffer.bytes.len()}]);
+        }
+        if !self.textures.is_empty() {
+            document["textures"] = json!(self.textures);
+            document["images"] = json!(self.images);
+            document["samplers"] =
+                json!([{"magFilter": 9729, "minFilter": 9987, "wrapS": 10497, "wrapT": 10497}]);
+        }
+        let mut json_bytes = serde_json::to_vec(&document).unwrap_or_default();
+        while !json_bytes.len().is_multiple_of(4) {
+            json_bytes.push(b' ');
+        }
+        let bin = &self.buffer.bytes;
+        let has_bin = !bin.is_empty();
+        let total = 12 + 8 + json_bytes.len() + if has_bin { 8 + bin.len() } else { 0 };
+        let mut out = Vec::with_capacity(total);
+        for v in [
+            GLB_MAGIC,
+            2,
+            total as u32,
+            json_bytes.len() as u32,
+            CHUNK_JSON,
+        ] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        out.extend_from_slice(&json_bytes);
+        if has_bin {
+            out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+            out.extend_from_slice(&CHUNK_BIN.to_le_bytes());
+            out.extend_from_slice(bin);
+        }
+        out
+    }
+}
+
+/// Encodes nodes as a glb (one single-primitive mesh per node, every node a scene root);
+/// `textures` are embedded once each as PNG.
+pub fn write_glb(nodes: &[ExportNode<'_>], textures: &[&RgbaImage], generator: &str) -> Vec<u8> {
+    let mut builder = GlbBuilder::new(generator);
+    let texture_ids: Vec<usize> = textures.iter().map(|t| builder.add_texture(t)).collect();
+    for node in nodes {
+        let texture = node.texture.and_then(|t| texture_ids.get(t).copied());
+        let primitive = PrimitiveSpec {
+            mesh: node.mesh,
+            texture,
+            color: if texture.is_some() {
+                [1.0; 4]
+            } else {
+                node.color
+            },
+            double_sided: node.double_sided,
+            alpha_mask: false,
+        };
+        let Some(mesh) = builder.add_mesh(&node.name, &[primitive]) else {
+            continue;
+        };
+        let index = builder.add_node(json!({"name": node.name, "mesh": mesh}));
+        builder.add_to_scene(index);
+    }
+    builder.finish()
+}
+
+/// One triangle primitive read from a glb, in world coordinates, with its material.
+#[derive(Clone, Debug)]
+pub struct GlbPart {
+    /// The node's name (`node_N` when unnamed).
+    pub name: String,
+    pub mesh: TriMesh,
+    /// Index into [`GlbParts::images`] of the base-colour texture.
+    pub image: Option<usize>,
+    /// Base colour factor (linear RGBA).
+    pub color: [f32; 4],
+    pub alpha_mask: bool,
+}
+
+/// The primitives and decoded images of a glb.
+#[derive(Clone, Debug, Default)]
+pub struct GlbParts {
+    pub parts: Vec<GlbPart>,
+    pub images: Vec<RgbaImage>,
+}
+
+fn parse_glb(bytes: &[u8], path: &Path) -> Result<gltf::Gltf, GltfError> {
+    gltf::Gltf::from_slice(bytes).map_err(|e| GltfError::Invalid {
         path: path.display().to_string(),
-        message,
-    };
-    let gltf = gltf::Gltf::from_slice(bytes).map_err(|e| invalid(e.to_string()))?;
-    let blob = gltf.blob.as_deref();
+        message: e.to_string(),
+    })
+}
+
+/// Every triangle primitive reachable from the default scene: node name, world transform,
+/// primitive.
+fn scene_primitives(gltf: &gltf::Gltf) -> Vec<(String, Matrix4<f32>, gltf::Primitive<'_>)> {
     let mut out = Vec::new();
     let Some(scene) = gltf.default_scene().or_else(|| gltf.scenes().next()) else {
-        return Ok(out);
+        return out;
     };
     let mut stack: Vec<(gltf::Node, Matrix4<f32>)> =
         scene.nodes().map(|n| (n, Matrix4::identity())).collect();
@@ -249,65 +378,143 @@ pub fn read_glb_meshes(bytes: &[u8], path: &Path) -> Result<Vec<NamedMesh>, Gltf
             .or(mesh.name())
             .map(str::to_owned)
             .unwrap_or_else(|| format!("node_{}", node.index()));
-        let normal_matrix = world
-            .fixed_view::<3, 3>(0, 0)
-            .try_inverse()
-            .map(|m| m.transpose())
-            .unwrap_or_else(nalgebra::Matrix3::identity);
-        let mut combined = TriMesh::default();
         for primitive in mesh.primitives() {
-            if primitive.mode() != gltf::mesh::Mode::Triangles {
-                continue;
+            if primitive.mode() == gltf::mesh::Mode::Triangles {
+                out.push((name.clone(), world, primitive));
             }
-            let reader = primitive.reader(|buffer| match buffer.source() {
-                gltf::buffer::Source::Bin => blob,
-                gltf::buffer::Source::Uri(_) => None,
-            });
-            let positions: Vec<Point3<f32>> = reader
-                .read_positions()
-                .ok_or_else(|| invalid(format!("node '{name}' has no positions")))?
-                .map(|p| {
-                    let h = world * nalgebra::Vector4::new(p[0], p[1], p[2], 1.0);
-                    Point3::new(h.x, h.y, h.z)
-                })
-                .collect();
-            let n = positions.len();
-            let normals: Option<Vec<Vector3<f32>>> = reader.read_normals().map(|it| {
-                it.map(|v| (normal_matrix * Vector3::new(v[0], v[1], v[2])).normalize())
-                    .collect()
-            });
-            let uvs: Vec<[f32; 2]> = reader
-                .read_tex_coords(0)
-                .map(|t| t.into_f32().collect())
-                .unwrap_or_else(|| vec![[0.0, 0.0]; n]);
-            let indices: Vec<u32> = match reader.read_indices() {
-                Some(indices) => indices.into_u32().collect(),
-                None => (0..n as u32).collect(),
-            };
-            if indices.iter().any(|&i| i as usize >= n) || uvs.len() != n {
-                return Err(invalid(format!("node '{name}' has out-of-range indices")));
-            }
-            let mut part = TriMesh {
-                positions,
-                normals: normals.unwrap_or_default(),
-                uvs,
-                triangles: indices
-                    .chunks_exact(3)
-                    .map(|c| [c[0], c[1], c[2]])
-                    .collect(),
-            };
-            if part.normals.len() != n {
-                part.compute_normals();
-            }
-            combined.append(&part);
         }
-        out.push(NamedMesh {
-            name,
-            mesh: combined,
-        });
+    }
+    out
+}
+
+/// A primitive's triangles in world coordinates.
+fn primitive_mesh(
+    primitive: &gltf::Primitive<'_>,
+    world: &Matrix4<f32>,
+    blob: Option<&[u8]>,
+    name: &str,
+    path: &Path,
+) -> Result<TriMesh, GltfError> {
+    let invalid = |message: String| GltfError::Invalid {
+        path: path.display().to_string(),
+        message,
+    };
+    let normal_matrix = world
+        .fixed_view::<3, 3>(0, 0)
+        .try_inverse()
+        .map(|m| m.transpose())
+        .unwrap_or_else(nalgebra::Matrix3::identity);
+    let reader = primitive.reader(|buffer| match buffer.source() {
+        gltf::buffer::Source::Bin => blob,
+        gltf::buffer::Source::Uri(_) => None,
+    });
+    let positions: Vec<Point3<f32>> = reader
+        .read_positions()
+        .ok_or_else(|| invalid(format!("node '{name}' has no positions")))?
+        .map(|p| {
+            let h = world * nalgebra::Vector4::new(p[0], p[1], p[2], 1.0);
+            Point3::new(h.x, h.y, h.z)
+        })
+        .collect();
+    let n = positions.len();
+    let normals: Option<Vec<Vector3<f32>>> = reader.read_normals().map(|it| {
+        it.map(|v| (normal_matrix * Vector3::new(v[0], v[1], v[2])).normalize())
+            .collect()
+    });
+    let uvs: Vec<[f32; 2]> = reader
+        .read_tex_coords(0)
+        .map(|t| t.into_f32().collect())
+        .unwrap_or_else(|| vec![[0.0, 0.0]; n]);
+    let indices: Vec<u32> = match reader.read_indices() {
+        Some(indices) => indices.into_u32().collect(),
+        None => (0..n as u32).collect(),
+    };
+    if indices.iter().any(|&i| i as usize >= n) || uvs.len() != n {
+        return Err(invalid(format!("node '{name}' has out-of-range indices")));
+    }
+    if positions
+        .iter()
+        .any(|p| !p.coords.iter().all(|v| v.is_finite()))
+    {
+        return Err(invalid(format!("node '{name}' has non-finite positions")));
+    }
+    let mut part = TriMesh {
+        positions,
+        normals: normals.unwrap_or_default(),
+        uvs,
+        triangles: indices
+            .chunks_exact(3)
+            .map(|c| [c[0], c[1], c[2]])
+            .collect(),
+    };
+    if part.normals.len() != n {
+        part.compute_normals();
+    }
+    Ok(part)
+}
+
+/// Reads every named node's triangle mesh from glb bytes, transformed to world coordinates.
+pub fn read_glb_meshes(bytes: &[u8], path: &Path) -> Result<Vec<NamedMesh>, GltfError> {
+    let gltf = parse_glb(bytes, path)?;
+    let blob = gltf.blob.as_deref();
+    let mut out: Vec<NamedMesh> = Vec::new();
+    for (name, world, primitive) in scene_primitives(&gltf) {
+        let part = primitive_mesh(&primitive, &world, blob, &name, path)?;
+        match out.last_mut().filter(|m| m.name == name) {
+            Some(last) => last.mesh.append(&part),
+            None => out.push(NamedMesh { name, mesh: part }),
+        }
     }
     out.sort_by(|a, b| a.name.cmp(&b.name));
     Ok(out)
+}
+
+/// Reads every triangle primitive of the default scene with its material, and decodes the
+/// embedded images (PNG or JPEG).
+pub fn read_glb_parts(bytes: &[u8], path: &Path) -> Result<GlbParts, GltfError> {
+    let gltf = parse_glb(bytes, path)?;
+    let blob = gltf.blob.as_deref();
+    let invalid = |message: String| GltfError::Invalid {
+        path: path.display().to_string(),
+        message,
+    };
+    let mut images = Vec::new();
+    for image in gltf.images() {
+        let gltf::image::Source::View { view, .. } = image.source() else {
+            return Err(invalid(format!(
+                "image {} is an external file; only embedded images are read",
+                image.index()
+            )));
+        };
+        let data = blob
+            .and_then(|b| b.get(view.offset()..view.offset() + view.length()))
+            .ok_or_else(|| {
+                invalid(format!(
+                    "image {} lies outside the binary chunk",
+                    image.index()
+                ))
+            })?;
+        let decoded = image::load_from_memory(data)
+            .map_err(|e| invalid(format!("image {}: {e}", image.index())))?;
+        images.push(decoded.to_rgba8());
+    }
+    let mut parts = Vec::new();
+    for (name, world, primitive) in scene_primitives(&gltf) {
+        let mesh = primitive_mesh(&primitive, &world, blob, &name, path)?;
+        let material = primitive.material();
+        let pbr = material.pbr_metallic_roughness();
+        parts.push(GlbPart {
+            name,
+            mesh,
+            image: pbr
+                .base_color_texture()
+                .map(|info| info.texture().source().index())
+                .filter(|&i| i < images.len()),
+            color: pbr.base_color_factor(),
+            alpha_mask: material.alpha_mode() == gltf::material::AlphaMode::Mask,
+        });
+    }
+    Ok(GlbParts { parts, images })
 }
 
 #[cfg(test)]

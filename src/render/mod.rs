@@ -323,6 +323,33 @@ fn instance_bytes(transforms: &[InstanceTransform]) -> Vec<u8> {
         .collect()
 }
 
+/// Fraction of texels whose alpha, scaled by `scale`, passes the ½ alpha test.
+fn alpha_coverage(image: &RgbaImage, scale: f32) -> f64 {
+    let passing = image
+        .pixels()
+        .filter(|p| p[3] as f32 * scale >= 127.5)
+        .count();
+    passing as f64 / (image.width() * image.height()).max(1) as f64
+}
+
+/// Scales a mip level's alpha so that its alpha-tested coverage matches `target` (bisection
+/// on the scale; Castaño's coverage-preserving mipmaps).
+fn preserve_alpha_coverage(level: &mut RgbaImage, target: f64) {
+    let (mut lo, mut hi) = (0.0f32, 16.0f32);
+    for _ in 0..20 {
+        let mid = 0.5 * (lo + hi);
+        if alpha_coverage(level, mid) < target {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let scale = 0.5 * (lo + hi);
+    for p in level.pixels_mut() {
+        p[3] = (p[3] as f32 * scale).round().min(255.0) as u8;
+    }
+}
+
 fn padded_bytes_per_row(width: u32, bytes_per_pixel: u32) -> u32 {
     let unpadded = width * bytes_per_pixel;
     let align = wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
@@ -582,8 +609,22 @@ impl Renderer {
 
     /// Uploads an sRGB texture with its mip chain.
     pub fn add_texture(&self, scene: &mut GpuScene, image: &RgbaImage) -> TextureHandle {
-        let levels = mip_chain(image);
-        let (w, h) = image.dimensions();
+        self.upload_texture(scene, mip_chain(image))
+    }
+
+    /// Uploads a cut-out texture (alpha-tested at ½) whose mip levels keep the alpha-tested
+    /// coverage of level 0, so that foliage and billboards do not thin out with distance.
+    pub fn add_cutout_texture(&self, scene: &mut GpuScene, image: &RgbaImage) -> TextureHandle {
+        let mut levels = mip_chain(image);
+        let coverage = alpha_coverage(image, 1.0);
+        for level in levels.iter_mut().skip(1) {
+            preserve_alpha_coverage(level, coverage);
+        }
+        self.upload_texture(scene, levels)
+    }
+
+    fn upload_texture(&self, scene: &mut GpuScene, levels: Vec<RgbaImage>) -> TextureHandle {
+        let (w, h) = levels.first().map_or((1, 1), |l| l.dimensions());
         let texture = self.device.create_texture(&wgpu::TextureDescriptor {
             label: Some("base colour"),
             size: wgpu::Extent3d {

@@ -12,3 +12,28 @@ pub mod texture;
 pub use dataset::{SynthError, SynthOptions, SynthSummary, write_dataset};
 pub use plant::{Preset, SynthPlant, generate_plant};
 pub use scene::Part;
+
+use crate::model::{ModelLeaf, PlantModel};
+use crate::util::rng::Rng;
+
+/// A synthetic plant as an exportable model (its leaves with textures of `texture_size`²
+/// texels, its branches meshed as exported branches are); the pot is left out. Deterministic
+/// in the plant's seed.
+pub fn plant_model(plant: &SynthPlant, texture_size: u32) -> PlantModel {
+    PlantModel {
+        leaves: plant
+            .leaves
+            .iter()
+            .map(|leaf| ModelLeaf {
+                id: leaf.id,
+                mesh: leaf.mesh.clone(),
+                texture: texture::leaf_texture(
+                    &leaf.look,
+                    texture_size,
+                    &mut Rng::stream(plant.seed, leaf.id as u64),
+                ),
+            })
+            .collect(),
+        branches: crate::branch::plant::model_branches(&plant.branches),
+    }
+}

@@ -1,0 +1,247 @@
+//! A plant as the LOD and scene code see it: a few parts (one mesh per material: leaves per
+//! atlas page, branches per colour) and their textures, made from a [`PlantModel`] or read
+//! back from a `plant.glb`.
+
+use std::path::Path;
+
+use image::{Rgba, RgbaImage};
+use nalgebra::Point3;
+
+use crate::mesh::TriMesh;
+use crate::model::PlantModel;
+use crate::model::gltf::{GltfError, read_glb_parts};
+use crate::model::plant::Atlas;
+
+/// One material's geometry.
+#[derive(Clone, Debug)]
+pub struct AssetPart {
+    /// `leaves_N` or `branches_N` (or the glb node name).
+    pub name: String,
+    pub mesh: TriMesh,
+    /// Index into [`PlantAsset::textures`].
+    pub texture: usize,
+    /// Cut-out texture (leaves, billboards).
+    pub alpha_test: bool,
+    /// Leaves (double-sided foliage) rather than wood.
+    pub is_leaf: bool,
+}
+
+/// A renderable plant: parts and their textures (sRGB).
+#[derive(Clone, Debug, Default)]
+pub struct PlantAsset {
+    pub parts: Vec<AssetPart>,
+    pub textures: Vec<RgbaImage>,
+}
+
+/// A linear colour as an sRGB texel.
+fn srgb_texel(linear: [f32; 4]) -> Rgba<u8> {
+    let encode = |c: f32| {
+        let c = c.clamp(0.0, 1.0);
+        let s = if c <= 0.003_130_8 {
+            12.92 * c
+        } else {
+            1.055 * c.powf(1.0 / 2.4) - 0.055
+        };
+        (s * 255.0).round() as u8
+    };
+    Rgba([
+        encode(linear[0]),
+        encode(linear[1]),
+        encode(linear[2]),
+        (linear[3].clamp(0.0, 1.0) * 255.0).round() as u8,
+    ])
+}
+
+impl PlantAsset {
+    /// Leaves merged per atlas page (cut-out), branches merged per colour (a 1×1 texture).
+    pub fn from_model(model: &PlantModel) -> Self {
+        let mut asset = Self::default();
+        let atlas = Atlas::pack(&model.leaves);
+        for (page, image) in atlas.pages.iter().enumerate() {
+            let mut mesh = TriMesh::default();
+            for (i, leaf) in model.leaves.iter().enumerate() {
+                if atlas.placements[i].0 == page {
+                    mesh.append(&atlas.remap(i, &leaf.mesh));
+                }
+            }
+            asset.textures.push(image.clone());
+            asset.parts.push(AssetPart {
+                name: format!("leaves_{page}"),
+                mesh,
+                texture: asset.textures.len() - 1,
+                alpha_test: true,
+                is_leaf: true,
+            });
+        }
+        // (colour, part index) of each branch colour seen so far.
+        let mut wood: Vec<([f32; 4], usize)> = Vec::new();
+        for branch in &model.branches {
+            let index = match wood.iter().find(|(c, _)| *c == branch.color) {
+                Some(&(_, index)) => index,
+                None => {
+                    asset
+                        .textures
+                        .push(RgbaImage::from_pixel(1, 1, srgb_texel(branch.color)));
+                    asset.parts.push(AssetPart {
+                        name: format!("branches_{}", wood.len()),
+                        mesh: TriMesh::default(),
+                        texture: asset.textures.len() - 1,
+                        alpha_test: false,
+                        is_leaf: false,
+                    });
+                    wood.push((branch.color, asset.parts.len() - 1));
+                    asset.parts.len() - 1
+                }
+            };
+            asset.parts[index].mesh.append(&branch.mesh);
+        }
+        asset.parts.retain(|p| !p.mesh.is_empty());
+        asset
+    }
+
+    /// Reads a `plant.glb`: every primitive of the default scene becomes a part; a part
+    /// without a texture gets a 1×1 texture of its base colour. Parts named `leaf_*` (or
+    /// with cut-out materials) count as leaves.
+    pub fn read_glb(path: &Path) -> Result<Self, GltfError> {
+        let bytes = std::fs::read(path).map_err(|e| GltfError::Invalid {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
+        let glb = read_glb_parts(&bytes, path)?;
+        let mut asset = Self {
+            parts: Vec::new(),
+            textures: glb.images,
+        };
+        for part in glb.parts {
+            let texture = match part.image {
+                Some(image) if part.color == [1.0; 4] => image,
+                Some(image) => {
+                    // Fold the colour factor into a copy of the texture.
+                    let tinted = tint(&asset.textures[image], part.color);
+                    asset.textures.push(tinted);
+                    asset.textures.len() - 1
+                }
+                None => {
+                    asset
+                        .textures
+                        .push(RgbaImage::from_pixel(1, 1, srgb_texel(part.color)));
+                    asset.textures.len() - 1
+                }
+            };
+            let is_leaf = part.name.starts_with("leaf") || part.alpha_mask;
+            asset.parts.push(AssetPart {
+                name: part.name,
+                mesh: part.mesh,
+                texture,
+                alpha_test: is_leaf && part.image.is_some(),
+                is_leaf,
+            });
+        }
+        asset.merge_by_material();
+        Ok(asset)
+    }
+
+    /// Merges parts that share a texture and flags (a `plant.glb` has one node per leaf, all
+    /// on the same atlas page).
+    fn merge_by_material(&mut self) {
+        let mut merged: Vec<AssetPart> = Vec::new();
+        for part in self.parts.drain(..) {
+            match merged.iter_mut().find(|m| {
+                m.texture == part.texture
+                    && m.alpha_test == part.alpha_test
+                    && m.is_leaf == part.is_leaf
+            }) {
+                Some(existing) => existing.mesh.append(&part.mesh),
+                None => {
+                    let name = if part.is_leaf {
+                        format!("leaves_{}", merged.len())
+                    } else {
+                        format!("branches_{}", merged.len())
+                    };
+                    merged.push(AssetPart { name, ..part });
+                }
+            }
+        }
+        self.parts = merged;
+    }
+
+    pub fn triangles(&self) -> usize {
+        self.parts.iter().map(|p| p.mesh.triangles.len()).sum()
+    }
+
+    /// All parts in one mesh.
+    pub fn merged(&self) -> TriMesh {
+        let mut mesh = TriMesh::default();
+        for part in &self.parts {
+            mesh.append(&part.mesh);
+        }
+        mesh
+    }
+
+    /// Axis-aligned bounds of all parts.
+    pub fn bounds(&self) -> Option<(Point3<f32>, Point3<f32>)> {
+        self.parts
+            .iter()
+            .filter_map(|p| p.mesh.bounds())
+            .reduce(|(lo, hi), (a, b)| (lo.inf(&a), hi.sup(&b)))
+    }
+
+    /// Bounding sphere (centre of the bounds, farthest vertex).
+    pub fn bounding_sphere(&self) -> Option<(Point3<f32>, f32)> {
+        let (lo, hi) = self.bounds()?;
+        let center = nalgebra::center(&lo, &hi);
+        let radius = self
+            .parts
+            .iter()
+            .flat_map(|p| p.mesh.positions.iter())
+            .map(|p| (p - center).norm())
+            .fold(0.0f32, f32::max);
+        Some((center, radius))
+    }
+}
+
+/// `image` multiplied by a linear colour factor (in sRGB texels, approximately).
+fn tint(image: &RgbaImage, color: [f32; 4]) -> RgbaImage {
+    let factor = srgb_texel(color);
+    RgbaImage::from_fn(image.width(), image.height(), |x, y| {
+        let p = image.get_pixel(x, y);
+        Rgba(std::array::from_fn(|c| {
+            ((p[c] as u32 * factor[c] as u32 + 127) / 255) as u8
+        }))
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::{Preset, generate_plant};
+
+    #[test]
+    fn a_synthetic_plant_survives_the_glb_round_trip_as_an_asset() {
+        let plant = generate_plant(Preset::Broadleaf, 3);
+        let model = crate::synth::plant_model(&plant, 64);
+        let asset = PlantAsset::from_model(&model);
+        assert!(asset.parts.iter().any(|p| p.is_leaf && p.alpha_test));
+        assert!(asset.parts.iter().any(|p| !p.is_leaf));
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("plant.glb");
+        std::fs::write(&path, model.to_glb()).unwrap();
+        let read = PlantAsset::read_glb(&path).unwrap();
+        assert_eq!(read.triangles(), asset.triangles());
+        assert_eq!(
+            read.parts.iter().filter(|p| p.is_leaf).count(),
+            asset.parts.iter().filter(|p| p.is_leaf).count()
+        );
+        let (c0, r0) = asset.bounding_sphere().unwrap();
+        let (c1, r1) = read.bounding_sphere().unwrap();
+        assert!((c0 - c1).norm() < 1e-5 && (r0 - r1).abs() < 1e-5);
+        // Branch colour survives as a texel.
+        let wood = read.parts.iter().find(|p| !p.is_leaf).unwrap();
+        assert_eq!(read.textures[wood.texture].dimensions(), (1, 1));
+    }
+
+    #[test]
+    fn srgb_encoding_matches_the_standard_curve() {
+        assert_eq!(srgb_texel([0.0, 1.0, 0.5, 1.0]).0, [0, 255, 188, 255]);
+    }
+}
