@@ -137,6 +137,26 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Build a plant's levels of detail (simplified levels and a star billboard, each with its
+    /// error) and write them as glTF with MSFT_lod.
+    Lod {
+        /// A plant glb (`frond reconstruct`'s plant.glb, or any glTF binary).
+        input: PathBuf,
+        /// Output glb.
+        #[arg(long)]
+        out: PathBuf,
+        /// Screen-space error bound λ in pixels for the switch distances and coverages.
+        #[arg(long, default_value_t = 4.0)]
+        threshold_px: f64,
+        /// Triangle fractions of the simplified levels, finest first.
+        #[arg(long, value_delimiter = ',', default_value = "0.5,0.25,0.1,0.04,0.015")]
+        ratios: Vec<f64>,
+        /// Texel height of each billboard tile (0: no billboard level).
+        #[arg(long, default_value_t = 256)]
+        billboard_tile: u32,
+        #[arg(long)]
+        json: bool,
+    },
     /// Score a reconstruction (segmentation.ply, plant.glb) against synthetic ground truth.
     Eval {
         /// The synthetic dataset (with gt/).
@@ -893,6 +913,83 @@ fn densify(scene_args: &SceneArgs, options: &frond::mvs::DensifyOptions, out: &P
     Ok(())
 }
 
+fn lod(
+    input: &Path,
+    out: &Path,
+    threshold_px: f64,
+    ratios: &[f64],
+    billboard_tile: u32,
+    json: bool,
+) -> Result<()> {
+    use frond::lod::plant::{PlantLodOptions, build_plant_lod};
+    if !(threshold_px.is_finite() && threshold_px > 0.0) {
+        bail!("--threshold-px must be positive, got {threshold_px}");
+    }
+    if let Some(bad) = ratios.iter().find(|r| !(**r > 0.0 && **r < 1.0)) {
+        bail!("--ratios: {bad} is not a fraction in (0, 1)");
+    }
+    let asset = frond::lod::asset::PlantAsset::read_glb(input)
+        .with_context(|| format!("reading {}", input.display()))?;
+    let options = PlantLodOptions {
+        chain: frond::lod::chain::ChainOptions {
+            ratios: ratios.to_vec(),
+            ..Default::default()
+        },
+        billboard: (billboard_tile > 0).then(|| frond::lod::billboard::BillboardOptions {
+            tile_height: billboard_tile,
+            ..Default::default()
+        }),
+    };
+    let mut renderer = match options.billboard {
+        Some(_) => Some(frond::render::Renderer::new().context("starting the renderer")?),
+        None => None,
+    };
+    let clock = std::time::Instant::now();
+    let chain = build_plant_lod(
+        &asset,
+        renderer.as_mut(),
+        &options,
+        &input.display().to_string(),
+    )
+    .with_context(|| format!("building the levels of detail of {}", input.display()))?;
+    let seconds = clock.elapsed().as_secs_f64();
+    frond::util::atomic::write_atomic(out, &chain.to_glb(threshold_px))
+        .with_context(|| format!("writing {}", out.display()))?;
+    let summary = chain.summary(threshold_px);
+    if json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({
+                "input": input, "output": out, "seconds": seconds,
+                "radius_m": chain.radius, "levels": summary
+            }))?
+        );
+        return Ok(());
+    }
+    println!(
+        "{}: {} levels in {seconds:.2} s (bounding radius {:.3} m), written to {}",
+        input.display(),
+        summary.len(),
+        chain.radius,
+        out.display()
+    );
+    println!(
+        "level  triangles  error (mm)  switch at (m, 1080p 60°, {threshold_px} px)  screen coverage"
+    );
+    for (i, level) in summary.iter().enumerate() {
+        println!(
+            "{:>5}{} {:>9}  {:>10.3}  {:>38.2}  {:>15.5}",
+            i,
+            if level.is_billboard { "B" } else { " " },
+            level.triangles,
+            1e3 * level.error_m,
+            level.switch_distance_m,
+            level.screen_coverage
+        );
+    }
+    Ok(())
+}
+
 fn init_logging(verbose: u8) {
     let default = match verbose {
         0 => "warn",
@@ -966,6 +1063,14 @@ fn main() -> Result<()> {
             None => reconstruct(scene, params, *fit, *template, out),
         },
         Command::Replay { project, out } => replay(project, out.as_deref()),
+        Command::Lod {
+            input,
+            out,
+            threshold_px,
+            ratios,
+            billboard_tile,
+            json,
+        } => lod(input, out, *threshold_px, ratios, *billboard_tile, *json),
         Command::Eval {
             gt,
             pred,

@@ -9,7 +9,7 @@ use nalgebra::Point3;
 
 use crate::mesh::TriMesh;
 use crate::model::PlantModel;
-use crate::model::gltf::{GltfError, read_glb_parts};
+use crate::model::gltf::{GlbPart, GltfError, read_glb_parts};
 use crate::model::plant::Atlas;
 
 /// One material's geometry.
@@ -108,63 +108,19 @@ impl PlantAsset {
             message: e.to_string(),
         })?;
         let glb = read_glb_parts(&bytes, path)?;
-        let mut asset = Self {
-            parts: Vec::new(),
-            textures: glb.images,
-        };
-        for part in glb.parts {
-            let texture = match part.image {
-                Some(image) if part.color == [1.0; 4] => image,
-                Some(image) => {
-                    // Fold the colour factor into a copy of the texture.
-                    let tinted = tint(&asset.textures[image], part.color);
-                    asset.textures.push(tinted);
-                    asset.textures.len() - 1
-                }
-                None => {
-                    asset
-                        .textures
-                        .push(RgbaImage::from_pixel(1, 1, srgb_texel(part.color)));
-                    asset.textures.len() - 1
-                }
-            };
-            let is_leaf = part.name.starts_with("leaf") || part.alpha_mask;
-            asset.parts.push(AssetPart {
-                name: part.name,
-                mesh: part.mesh,
-                texture,
-                alpha_test: is_leaf && part.image.is_some(),
-                is_leaf,
-            });
-        }
-        asset.merge_by_material();
-        Ok(asset)
+        let mut textures = glb.images;
+        let parts = parts_from_glb(glb.parts, &mut textures);
+        Ok(Self { parts, textures })
     }
 
-    /// Merges parts that share a texture and flags (a `plant.glb` has one node per leaf, all
-    /// on the same atlas page).
-    fn merge_by_material(&mut self) {
-        let mut merged: Vec<AssetPart> = Vec::new();
-        for part in self.parts.drain(..) {
-            match merged.iter_mut().find(|m| {
-                m.texture == part.texture
-                    && m.alpha_test == part.alpha_test
-                    && m.is_leaf == part.is_leaf
-            }) {
-                Some(existing) => existing.mesh.append(&part.mesh),
-                None => {
-                    let name = if part.is_leaf {
-                        format!("leaves_{}", merged.len())
-                    } else {
-                        format!("branches_{}", merged.len())
-                    };
-                    merged.push(AssetPart { name, ..part });
-                }
-            }
+    /// Parts of glb primitives whose textures are in `textures` (the glb's images; colour
+    /// textures and tinted copies are appended), merged by material.
+    pub fn from_glb_parts(parts: Vec<GlbPart>, textures: &mut Vec<RgbaImage>) -> Self {
+        Self {
+            parts: parts_from_glb(parts, textures),
+            textures: Vec::new(),
         }
-        self.parts = merged;
     }
-
     pub fn triangles(&self) -> usize {
         self.parts.iter().map(|p| p.mesh.triangles.len()).sum()
     }
@@ -198,6 +154,52 @@ impl PlantAsset {
             .fold(0.0f32, f32::max);
         Some((center, radius))
     }
+}
+
+/// Parts of glb primitives (see [`PlantAsset::from_glb_parts`]). A part without a texture gets
+/// a 1×1 texture of its base colour; parts named `leaf_*` (or with cut-out materials) count as
+/// leaves. Parts sharing a texture and flags are merged (a `plant.glb` has one node per leaf,
+/// all on the same atlas page).
+fn parts_from_glb(glb_parts: Vec<GlbPart>, textures: &mut Vec<RgbaImage>) -> Vec<AssetPart> {
+    let mut merged: Vec<AssetPart> = Vec::new();
+    for part in glb_parts {
+        let texture = match part.image.filter(|&i| i < textures.len()) {
+            Some(image) if part.color == [1.0; 4] => image,
+            Some(image) => {
+                // Fold the colour factor into a copy of the texture.
+                let tinted = tint(&textures[image], part.color);
+                textures.push(tinted);
+                textures.len() - 1
+            }
+            None => {
+                textures.push(RgbaImage::from_pixel(1, 1, srgb_texel(part.color)));
+                textures.len() - 1
+            }
+        };
+        let is_leaf = part.name.starts_with("leaf") || part.alpha_mask;
+        let alpha_test = part.alpha_mask || (is_leaf && part.image.is_some());
+        match merged
+            .iter_mut()
+            .find(|m| m.texture == texture && m.alpha_test == alpha_test && m.is_leaf == is_leaf)
+        {
+            Some(existing) => existing.mesh.append(&part.mesh),
+            None => {
+                let name = if is_leaf {
+                    format!("leaves_{}", merged.len())
+                } else {
+                    format!("branches_{}", merged.len())
+                };
+                merged.push(AssetPart {
+                    name,
+                    mesh: part.mesh,
+                    texture,
+                    alpha_test,
+                    is_leaf,
+                });
+            }
+        }
+    }
+    merged
 }
 
 /// `image` multiplied by a linear colour factor (in sRGB texels, approximately).

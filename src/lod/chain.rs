@@ -12,10 +12,10 @@ use super::simplify::{SimplifyError, SimplifyOptions, simplify};
 use crate::mesh::{TriMesh, point_triangle_distance};
 use crate::util::rng::Rng;
 
-/// One level of detail.
+/// One level of detail: the simplified parts, in the order given.
 #[derive(Clone, Debug)]
 pub struct LodLevel {
-    pub mesh: TriMesh,
+    pub parts: Vec<TriMesh>,
     /// μ: symmetric Hausdorff distance to the full model, from samples (0 for L0).
     pub error_world: f64,
     pub triangles: usize,
@@ -112,27 +112,55 @@ pub fn surface_deviation(a: &TriMesh, b: &TriMesh, samples: usize, seed: u64) ->
 /// Builds the chain: L0 = `mesh`, then one level per ratio simplified from the full model.
 /// Levels that would not have fewer triangles than the previous one are left out.
 pub fn build_chain(mesh: &TriMesh, options: &ChainOptions) -> Result<Vec<LodLevel>, SimplifyError> {
+    build_part_chain(std::slice::from_ref(mesh), options)
+}
+
+fn merged(parts: &[TriMesh]) -> TriMesh {
+    let mut mesh = TriMesh::default();
+    for part in parts {
+        mesh.append(part);
+    }
+    mesh
+}
+
+/// [`build_chain`] for a model of several parts (materials): every non-empty part is
+/// simplified to the level's fraction of its own triangles (at least one), so no part
+/// vanishes and parts never merge; μ is measured on all parts together.
+pub fn build_part_chain(
+    parts: &[TriMesh],
+    options: &ChainOptions,
+) -> Result<Vec<LodLevel>, SimplifyError> {
+    let full = merged(parts);
     let mut levels = vec![LodLevel {
-        mesh: mesh.clone(),
+        parts: parts.to_vec(),
         error_world: 0.0,
-        triangles: mesh.triangles.len(),
+        triangles: full.triangles.len(),
     }];
     for (i, &ratio) in options.ratios.iter().enumerate() {
-        let target = (mesh.triangles.len() as f64 * ratio.clamp(0.0, 1.0)).round() as usize;
-        let simplified = simplify(mesh, &SimplifyOptions::to_triangles(target))?.mesh;
+        let mut simplified = Vec::with_capacity(parts.len());
+        for part in parts {
+            if part.triangles.is_empty() {
+                simplified.push(part.clone());
+                continue;
+            }
+            let target =
+                ((part.triangles.len() as f64 * ratio.clamp(0.0, 1.0)).round() as usize).max(1);
+            simplified.push(simplify(part, &SimplifyOptions::to_triangles(target))?.mesh);
+        }
+        let level = merged(&simplified);
         let previous = levels.last().map_or(usize::MAX, |l| l.triangles);
-        if simplified.triangles.len() >= previous || simplified.triangles.is_empty() {
+        if level.triangles.len() >= previous || level.triangles.is_empty() {
             continue;
         }
         let error_world = surface_deviation(
-            mesh,
-            &simplified,
+            &full,
+            &level,
             options.error_samples,
             options.seed.wrapping_add(i as u64),
         );
         levels.push(LodLevel {
-            triangles: simplified.triangles.len(),
-            mesh: simplified,
+            triangles: level.triangles.len(),
+            parts: simplified,
             error_world,
         });
     }

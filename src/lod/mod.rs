@@ -4,6 +4,7 @@
 pub mod asset;
 pub mod billboard;
 pub mod chain;
+pub mod plant;
 pub mod select;
 pub mod simplify;
 

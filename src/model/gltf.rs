@@ -237,6 +237,13 @@ impl GlbBuilder {
         self.nodes.len() - 1
     }
 
+    /// Replaces node `index` (e.g. to add extensions that name nodes added after it).
+    pub fn replace_node(&mut self, index: usize, node: Value) {
+        if let Some(slot) = self.nodes.get_mut(index) {
+            *slot = node;
+        }
+    }
+
     /// Makes `node` a root of the scene.
     pub fn add_to_scene(&mut self, node: usize) {
         self.scene_nodes.push(node);
@@ -469,10 +476,8 @@ pub fn read_glb_meshes(bytes: &[u8], path: &Path) -> Result<Vec<NamedMesh>, Gltf
     Ok(out)
 }
 
-/// Reads every triangle primitive of the default scene with its material, and decodes the
-/// embedded images (PNG or JPEG).
-pub fn read_glb_parts(bytes: &[u8], path: &Path) -> Result<GlbParts, GltfError> {
-    let gltf = parse_glb(bytes, path)?;
+/// Decodes the glb's embedded images (PNG or JPEG).
+fn decode_images(gltf: &gltf::Gltf, path: &Path) -> Result<Vec<RgbaImage>, GltfError> {
     let blob = gltf.blob.as_deref();
     let invalid = |message: String| GltfError::Invalid {
         path: path.display().to_string(),
@@ -498,23 +503,146 @@ pub fn read_glb_parts(bytes: &[u8], path: &Path) -> Result<GlbParts, GltfError> 
             .map_err(|e| invalid(format!("image {}: {e}", image.index())))?;
         images.push(decoded.to_rgba8());
     }
+    Ok(images)
+}
+
+/// A primitive with its material as a [`GlbPart`].
+fn glb_part(
+    gltf: &gltf::Gltf,
+    name: String,
+    world: &Matrix4<f32>,
+    primitive: &gltf::Primitive<'_>,
+    image_count: usize,
+    path: &Path,
+) -> Result<GlbPart, GltfError> {
+    let mesh = primitive_mesh(primitive, world, gltf.blob.as_deref(), &name, path)?;
+    let material = primitive.material();
+    let pbr = material.pbr_metallic_roughness();
+    Ok(GlbPart {
+        name,
+        mesh,
+        image: pbr
+            .base_color_texture()
+            .map(|info| info.texture().source().index())
+            .filter(|&i| i < image_count),
+        color: pbr.base_color_factor(),
+        alpha_mask: material.alpha_mode() == gltf::material::AlphaMode::Mask,
+    })
+}
+
+/// Reads every triangle primitive of the default scene with its material, and decodes the
+/// embedded images (PNG or JPEG).
+pub fn read_glb_parts(bytes: &[u8], path: &Path) -> Result<GlbParts, GltfError> {
+    let gltf = parse_glb(bytes, path)?;
+    let images = decode_images(&gltf, path)?;
     let mut parts = Vec::new();
     for (name, world, primitive) in scene_primitives(&gltf) {
-        let mesh = primitive_mesh(&primitive, &world, blob, &name, path)?;
-        let material = primitive.material();
-        let pbr = material.pbr_metallic_roughness();
-        parts.push(GlbPart {
+        parts.push(glb_part(
+            &gltf,
             name,
-            mesh,
-            image: pbr
-                .base_color_texture()
-                .map(|info| info.texture().source().index())
-                .filter(|&i| i < images.len()),
-            color: pbr.base_color_factor(),
-            alpha_mask: material.alpha_mode() == gltf::material::AlphaMode::Mask,
-        });
+            &world,
+            &primitive,
+            images.len(),
+            path,
+        )?);
     }
     Ok(GlbParts { parts, images })
+}
+
+/// Discrete levels of detail of a glb: the `MSFT_lod` chain of the first scene root that has
+/// one (its own mesh, then the meshes of the nodes in `ids`), or the whole scene as one level.
+#[derive(Clone, Debug, Default)]
+pub struct GlbLod {
+    /// Parts of each level, finest first (node transforms applied).
+    pub levels: Vec<Vec<GlbPart>>,
+    pub images: Vec<RgbaImage>,
+    /// The root node's `extras` (e.g. `MSFT_screencoverage`), `null` when absent.
+    pub extras: Value,
+}
+
+/// The JSON chunk of a glb.
+fn glb_json(bytes: &[u8], path: &Path) -> Result<Value, GltfError> {
+    let invalid = |message: &str| GltfError::Invalid {
+        path: path.display().to_string(),
+        message: message.to_owned(),
+    };
+    let word = |at: usize| {
+        bytes
+            .get(at..at + 4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    };
+    if word(0) != Some(GLB_MAGIC) || word(16) != Some(CHUNK_JSON) {
+        return Err(invalid("not a binary glTF (glb) file"));
+    }
+    let length = word(12).ok_or_else(|| invalid("truncated header"))? as usize;
+    let chunk = bytes
+        .get(20..20 + length)
+        .ok_or_else(|| invalid("truncated JSON chunk"))?;
+    serde_json::from_slice(chunk).map_err(|e| invalid(&format!("JSON chunk: {e}")))
+}
+
+/// Reads the levels of detail of a glb (see [`GlbLod`]).
+pub fn read_glb_lod(bytes: &[u8], path: &Path) -> Result<GlbLod, GltfError> {
+    let gltf = parse_glb(bytes, path)?;
+    let json = glb_json(bytes, path)?;
+    let images = decode_images(&gltf, path)?;
+    let invalid = |message: String| GltfError::Invalid {
+        path: path.display().to_string(),
+        message,
+    };
+    let roots: Vec<gltf::Node<'_>> = gltf
+        .default_scene()
+        .or_else(|| gltf.scenes().next())
+        .map(|scene| scene.nodes().collect())
+        .unwrap_or_default();
+    let lod_root = roots.iter().find_map(|node| {
+        let ids = json["nodes"][node.index()]["extensions"]["MSFT_lod"]["ids"].as_array()?;
+        Some((node.clone(), ids.clone()))
+    });
+    let Some((root, ids)) = lod_root else {
+        return Ok(GlbLod {
+            levels: vec![read_glb_parts(bytes, path)?.parts],
+            images,
+            extras: Value::Null,
+        });
+    };
+    let mut level_nodes = vec![root.clone()];
+    for id in &ids {
+        let node = id
+            .as_u64()
+            .and_then(|i| gltf.nodes().nth(i as usize))
+            .ok_or_else(|| invalid(format!("MSFT_lod id {id} is not a node")))?;
+        level_nodes.push(node);
+    }
+    let root_world = Matrix4::from_column_slice(&root.transform().matrix().concat());
+    let mut levels = Vec::with_capacity(level_nodes.len());
+    for node in level_nodes {
+        let name = node
+            .name()
+            .map(str::to_owned)
+            .unwrap_or_else(|| format!("node_{}", node.index()));
+        let mut parts = Vec::new();
+        if let Some(mesh) = node.mesh() {
+            for primitive in mesh.primitives() {
+                if primitive.mode() == gltf::mesh::Mode::Triangles {
+                    parts.push(glb_part(
+                        &gltf,
+                        name.clone(),
+                        &root_world,
+                        &primitive,
+                        images.len(),
+                        path,
+                    )?);
+                }
+            }
+        }
+        levels.push(parts);
+    }
+    Ok(GlbLod {
+        levels,
+        images,
+        extras: json["nodes"][root.index()]["extras"].clone(),
+    })
 }
 
 #[cfg(test)]

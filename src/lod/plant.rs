@@ -1,0 +1,373 @@
+//! A plant's whole LOD chain: the full model, simplified levels (every part simplified to the
+//! same fraction, so materials and their borders survive), and the star billboard as the
+//! coarsest level; each level with its error μ and triangle count. Written to and read from
+//! glTF with `MSFT_lod` (levels as nodes, `MSFT_screencoverage` in the root's extras) and our
+//! own `frond_lod` extras (μ per level), so a LOD glb is self-contained.
+
+use std::path::Path;
+
+use image::RgbaImage;
+use nalgebra::Point3;
+use serde::Serialize;
+use serde_json::json;
+
+use super::asset::{AssetPart, PlantAsset};
+use super::billboard::{BillboardOptions, bake_star};
+use super::chain::{ChainOptions, build_part_chain};
+use super::select::{Viewport, switch_distance};
+use super::simplify::SimplifyError;
+use crate::mesh::TriMesh;
+use crate::model::gltf::{GlbBuilder, GltfError, PrimitiveSpec, read_glb_lod};
+use crate::render::{RenderError, Renderer};
+
+/// LOD building failures.
+#[derive(Debug, thiserror::Error)]
+pub enum LodError {
+    #[error("simplifying: {0}")]
+    Simplify(#[from] SimplifyError),
+    #[error("baking the billboard: {0}")]
+    Render(#[from] RenderError),
+    #[error(transparent)]
+    Gltf(#[from] GltfError),
+    #[error("{0}: the plant has no triangles")]
+    Empty(String),
+}
+
+/// One level of a plant.
+#[derive(Clone, Debug)]
+pub struct PlantLevel {
+    pub parts: Vec<AssetPart>,
+    /// μ: symmetric Hausdorff distance to the full model (0 for L0); for the billboard, the
+    /// farthest vertex of the full model from its nearest quad.
+    pub error_world: f64,
+    pub triangles: usize,
+    pub is_billboard: bool,
+}
+
+/// A plant's levels of detail, finest first, sharing `textures`.
+#[derive(Clone, Debug)]
+pub struct PlantLod {
+    pub levels: Vec<PlantLevel>,
+    pub textures: Vec<RgbaImage>,
+    /// Bounding sphere of the full model.
+    pub center: Point3<f32>,
+    pub radius: f32,
+}
+
+/// Settings of [`build_plant_lod`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlantLodOptions {
+    pub chain: ChainOptions,
+    /// The billboard level; `None` leaves it out.
+    pub billboard: Option<BillboardOptions>,
+}
+
+impl Default for PlantLodOptions {
+    fn default() -> Self {
+        Self {
+            chain: ChainOptions::default(),
+            billboard: Some(BillboardOptions::default()),
+        }
+    }
+}
+
+/// What a LOD glb says about each level (written as the root node's `frond_lod` extras).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct LevelSummary {
+    pub triangles: usize,
+    pub error_m: f64,
+    pub is_billboard: bool,
+    /// Distance (m) beyond which this level may replace the previous one on the reference
+    /// viewport at λ = 4 px (0 for L0).
+    pub switch_distance_m: f64,
+    /// `MSFT_screencoverage` entry: the fraction of the reference screen the bounding sphere
+    /// covers when this level gives way to the next (0 for the last).
+    pub screen_coverage: f64,
+}
+
+/// The viewport `MSFT_screencoverage` values refer to: 1920×1080, 60° vertical field of view.
+pub const REFERENCE_VIEWPORT: Viewport = Viewport {
+    height_px: 1080.0,
+    fov_y_rad: std::f64::consts::FRAC_PI_3,
+};
+const REFERENCE_WIDTH_PX: f64 = 1920.0;
+
+/// Builds the chain of `asset`: L0, the simplified levels of `options.chain`, then the
+/// billboard (baked with `renderer`) when asked for. μ is made non-decreasing.
+pub fn build_plant_lod(
+    asset: &PlantAsset,
+    renderer: Option<&mut Renderer>,
+    options: &PlantLodOptions,
+    label: &str,
+) -> Result<PlantLod, LodError> {
+    let (center, radius) = asset
+        .bounding_sphere()
+        .filter(|_| asset.triangles() > 0)
+        .ok_or_else(|| LodError::Empty(label.to_owned()))?;
+    let meshes: Vec<TriMesh> = asset.parts.iter().map(|p| p.mesh.clone()).collect();
+    let chain = build_part_chain(&meshes, &options.chain)?;
+    let mut levels: Vec<PlantLevel> = chain
+        .into_iter()
+        .map(|level| PlantLevel {
+            parts: asset
+                .parts
+                .iter()
+                .zip(level.parts)
+                .map(|(part, mesh)| AssetPart {
+                    mesh,
+                    ..part.clone()
+                })
+                .collect(),
+            error_world: level.error_world,
+            triangles: level.triangles,
+            is_billboard: false,
+        })
+        .collect();
+    let mut textures = asset.textures.clone();
+    if let (Some(renderer), Some(billboard)) = (renderer, &options.billboard) {
+        let star = bake_star(renderer, asset, billboard)?;
+        textures.push(star.atlas);
+        levels.push(PlantLevel {
+            triangles: star.mesh.triangles.len(),
+            parts: vec![AssetPart {
+                name: "billboard".into(),
+                mesh: star.mesh,
+                texture: textures.len() - 1,
+                alpha_test: true,
+                is_leaf: true,
+            }],
+            error_world: star.error_world,
+            is_billboard: true,
+        });
+    }
+    let mut running = 0.0f64;
+    for level in &mut levels {
+        running = running.max(level.error_world);
+        level.error_world = running;
+    }
+    Ok(PlantLod {
+        levels,
+        textures,
+        center,
+        radius,
+    })
+}
+
+impl PlantLod {
+    /// Errors μ of the levels, finest first.
+    pub fn errors(&self) -> Vec<f64> {
+        self.levels.iter().map(|l| l.error_world).collect()
+    }
+
+    /// Per-level summary on the reference viewport at `threshold_px`.
+    pub fn summary(&self, threshold_px: f64) -> Vec<LevelSummary> {
+        let focal_px =
+            0.5 * REFERENCE_VIEWPORT.height_px / (0.5 * REFERENCE_VIEWPORT.fov_y_rad).tan();
+        let coverage_at = |distance: f64| {
+            if distance <= 0.0 {
+                return 1.0;
+            }
+            let radius_px = self.radius as f64 * focal_px / distance;
+            (std::f64::consts::PI * radius_px * radius_px
+                / (REFERENCE_WIDTH_PX * REFERENCE_VIEWPORT.height_px))
+                .min(1.0)
+        };
+        let switches: Vec<f64> = self
+            .levels
+            .iter()
+            .map(|l| switch_distance(l.error_world, &REFERENCE_VIEWPORT, threshold_px))
+            .collect();
+        self.levels
+            .iter()
+            .enumerate()
+            .map(|(i, level)| LevelSummary {
+                triangles: level.triangles,
+                error_m: level.error_world,
+                is_billboard: level.is_billboard,
+                switch_distance_m: switches[i],
+                screen_coverage: switches.get(i + 1).map_or(0.0, |&d| coverage_at(d)),
+            })
+            .collect()
+    }
+
+    /// The chain as a glb: the root node `plant_LOD0` carries `MSFT_lod` (ids of the
+    /// `plant_LODi` nodes, which are not in the scene) and, in its extras,
+    /// `MSFT_screencoverage` (reference viewport, λ = `threshold_px`) and `frond_lod`.
+    pub fn to_glb(&self, threshold_px: f64) -> Vec<u8> {
+        let mut builder = GlbBuilder::new(&format!("frond {}", env!("CARGO_PKG_VERSION")));
+        let texture_ids: Vec<usize> = self
+            .textures
+            .iter()
+            .map(|t| builder.add_texture(t))
+            .collect();
+        let summary = self.summary(threshold_px);
+        let mut nodes = Vec::with_capacity(self.levels.len());
+        let mut root_mesh = None;
+        for (i, level) in self.levels.iter().enumerate() {
+            let primitives: Vec<PrimitiveSpec<'_>> = level
+                .parts
+                .iter()
+                .map(|part| PrimitiveSpec {
+                    mesh: &part.mesh,
+                    texture: texture_ids.get(part.texture).copied(),
+                    color: [1.0; 4],
+                    double_sided: true,
+                    alpha_mask: part.alpha_test,
+                })
+                .collect();
+            let name = format!("plant_LOD{i}");
+            let mesh = builder.add_mesh(&name, &primitives);
+            let mut node = json!({ "name": name });
+            if let Some(mesh) = mesh {
+                node["mesh"] = json!(mesh);
+            }
+            if i == 0 {
+                root_mesh = mesh;
+            }
+            nodes.push(builder.add_node(node));
+        }
+        // The root's extensions and extras refer to the other nodes, so it is rewritten last.
+        let mut root = json!({
+            "name": "plant_LOD0",
+            "extensions": {"MSFT_lod": {"ids": nodes[1..].to_vec()}},
+            "extras": {
+                "MSFT_screencoverage": summary.iter().map(|s| s.screen_coverage).collect::<Vec<_>>(),
+                "frond_lod": {
+                    "threshold_px": threshold_px,
+                    "reference_viewport": {"width_px": REFERENCE_WIDTH_PX, "height_px": REFERENCE_VIEWPORT.height_px, "fov_y_deg": REFERENCE_VIEWPORT.fov_y_rad.to_degrees()},
+                    "levels": summary,
+                }
+            }
+        });
+        if let Some(mesh) = root_mesh {
+            root["mesh"] = json!(mesh);
+        }
+        builder.replace_node(nodes[0], root);
+        builder.add_to_scene(nodes[0]);
+        if nodes.len() > 1 {
+            builder.use_extension("MSFT_lod");
+        }
+        builder.finish()
+    }
+
+    /// Reads a LOD glb written by [`PlantLod::to_glb`], or any glb (with or without
+    /// `MSFT_lod`): levels without `frond_lod` errors get theirs measured against L0.
+    pub fn read_glb(path: &Path, error_samples: usize) -> Result<Self, LodError> {
+        let bytes = std::fs::read(path).map_err(|e| GltfError::Invalid {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
+        let glb = read_glb_lod(&bytes, path)?;
+        let stored = &glb.extras["frond_lod"]["levels"];
+        let mut textures = glb.images;
+        let mut levels = Vec::with_capacity(glb.levels.len());
+        for (i, parts) in glb.levels.into_iter().enumerate() {
+            let asset = PlantAsset::from_glb_parts(parts, &mut textures);
+            let is_billboard = stored[i]["is_billboard"].as_bool().unwrap_or(false);
+            levels.push((asset, stored[i]["error_m"].as_f64(), is_billboard));
+        }
+        let label = path.display().to_string();
+        let full = levels
+            .first()
+            .map(|(asset, _, _)| asset.merged())
+            .filter(|m| !m.is_empty())
+            .ok_or_else(|| LodError::Empty(label.clone()))?;
+        let (center, radius) = levels[0]
+            .0
+            .bounding_sphere()
+            .ok_or_else(|| LodError::Empty(label.clone()))?;
+        let mut out = Vec::with_capacity(levels.len());
+        let mut running = 0.0f64;
+        for (i, (asset, error, is_billboard)) in levels.into_iter().enumerate() {
+            let error_world = match error {
+                Some(e) if e.is_finite() && e >= 0.0 => e,
+                _ if i == 0 => 0.0,
+                _ => {
+                    super::chain::surface_deviation(&full, &asset.merged(), error_samples, i as u64)
+                }
+            };
+            running = running.max(error_world);
+            out.push(PlantLevel {
+                triangles: asset.triangles(),
+                parts: asset.parts,
+                error_world: running,
+                is_billboard,
+            });
+        }
+        Ok(Self {
+            levels: out,
+            textures,
+            center,
+            radius,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::{Preset, generate_plant, plant_model};
+
+    #[test]
+    fn a_lod_glb_round_trips_with_its_levels_errors_and_coverage() {
+        let plant = generate_plant(Preset::Broadleaf, 4);
+        let asset = PlantAsset::from_model(&plant_model(&plant, 32));
+        let mut renderer = Renderer::new().unwrap();
+        let options = PlantLodOptions {
+            chain: ChainOptions {
+                ratios: vec![0.25, 0.05],
+                error_samples: 500,
+                seed: 3,
+            },
+            billboard: Some(BillboardOptions {
+                quads: 3,
+                tile_height: 64,
+            }),
+        };
+        let lod = build_plant_lod(&asset, Some(&mut renderer), &options, "test").unwrap();
+        assert_eq!(lod.levels.len(), 4);
+        assert!(lod.levels.last().unwrap().is_billboard);
+        assert_eq!(lod.levels.last().unwrap().triangles, 6);
+        for pair in lod.levels.windows(2) {
+            assert!(pair[1].triangles < pair[0].triangles);
+            assert!(pair[1].error_world >= pair[0].error_world);
+        }
+        let summary = lod.summary(4.0);
+        for pair in summary.windows(2) {
+            assert!(pair[1].screen_coverage < pair[0].screen_coverage);
+            assert!(pair[1].switch_distance_m >= pair[0].switch_distance_m);
+        }
+        assert_eq!(summary.last().unwrap().screen_coverage, 0.0);
+
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("plant_lod.glb");
+        std::fs::write(&path, lod.to_glb(4.0)).unwrap();
+        let read = PlantLod::read_glb(&path, 500).unwrap();
+        assert_eq!(read.levels.len(), lod.levels.len());
+        for (a, b) in read.levels.iter().zip(&lod.levels) {
+            assert_eq!(a.triangles, b.triangles);
+            assert_eq!(a.is_billboard, b.is_billboard);
+            assert!((a.error_world - b.error_world).abs() < 1e-9);
+        }
+        assert!((read.radius - lod.radius).abs() < 1e-5);
+        // A reader that ignores MSFT_lod sees the full plant only.
+        let plain = PlantAsset::read_glb(&path).unwrap();
+        assert_eq!(plain.triangles(), asset.triangles());
+    }
+
+    #[test]
+    fn a_plain_glb_is_one_level_and_an_empty_plant_is_an_error() {
+        let plant = generate_plant(Preset::Smallleaf, 2);
+        let model = plant_model(&plant, 16);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("plant.glb");
+        std::fs::write(&path, model.to_glb()).unwrap();
+        let read = PlantLod::read_glb(&path, 100).unwrap();
+        assert_eq!(read.levels.len(), 1);
+        assert_eq!(read.levels[0].error_world, 0.0);
+        let empty = PlantAsset::default();
+        let err =
+            build_plant_lod(&empty, None, &PlantLodOptions::default(), "nothing.glb").unwrap_err();
+        assert!(err.to_string().contains("nothing.glb"), "{err}");
+    }
+}

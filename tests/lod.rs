@@ -1,0 +1,99 @@
+//! `frond lod`: a plant glb in, a glb with MSFT_lod out, accepted by the Khronos validator and
+//! read back level by level.
+
+use std::path::Path;
+use std::process::Command;
+
+use assert_cmd::cargo::cargo_bin_cmd;
+use frond::lod::plant::PlantLod;
+use frond::synth::{Preset, generate_plant, plant_model};
+use serde_json::Value;
+
+fn validate(file: &Path) -> (bool, String) {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/validate_gltf.js");
+    let output = Command::new("node")
+        .arg(script)
+        .arg(file)
+        .output()
+        .unwrap_or_else(|e| panic!("node does not run ({e}): run scripts/setup.sh"));
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert_ne!(
+        output.status.code(),
+        Some(2),
+        "validator could not start: {text}"
+    );
+    (output.status.success(), text)
+}
+
+#[test]
+fn lod_writes_msft_lod_that_the_khronos_validator_accepts() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("plant.glb");
+    let plant = generate_plant(Preset::Medium, 7);
+    std::fs::write(&input, plant_model(&plant, 32).to_glb()).unwrap();
+    let output = dir.path().join("plant_lod.glb");
+    let run = cargo_bin_cmd!("frond")
+        .arg("lod")
+        .arg(&input)
+        .arg("--out")
+        .arg(&output)
+        .args([
+            "--ratios",
+            "0.3,0.1,0.03",
+            "--billboard-tile",
+            "64",
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let report: Value = serde_json::from_slice(&run.stdout).unwrap();
+    let levels = report["levels"].as_array().unwrap();
+    assert_eq!(levels.len(), 5, "{report}");
+    assert_eq!(levels[4]["is_billboard"], true);
+    assert_eq!(levels[4]["triangles"], 6);
+
+    let (valid, text) = validate(&output);
+    assert!(valid && text.contains(": 0 errors"), "validator: {text}");
+
+    let lod = PlantLod::read_glb(&output, 200).unwrap();
+    assert_eq!(lod.levels.len(), 5);
+    for (level, stated) in lod.levels.iter().zip(levels) {
+        assert_eq!(
+            level.triangles as u64,
+            stated["triangles"].as_u64().unwrap()
+        );
+        assert!((level.error_world - stated["error_m"].as_f64().unwrap()).abs() < 1e-9);
+    }
+    // Each simplified level keeps at most about its share of the full model's triangles.
+    let full = lod.levels[0].triangles as f64;
+    for (level, ratio) in lod.levels[1..4].iter().zip([0.3, 0.1, 0.03]) {
+        assert!(level.triangles as f64 <= ratio * full * 1.05 + 8.0);
+    }
+}
+
+#[test]
+fn lod_names_the_file_it_cannot_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("not_a_plant.glb");
+    std::fs::write(&input, b"glTF but not really").unwrap();
+    let run = cargo_bin_cmd!("frond")
+        .arg("lod")
+        .arg(&input)
+        .arg("--out")
+        .arg(dir.path().join("out.glb"))
+        .output()
+        .unwrap();
+    assert!(!run.status.success());
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(stderr.contains("not_a_plant.glb"), "{stderr}");
+    assert!(!dir.path().join("out.glb").exists());
+}
