@@ -18,6 +18,7 @@
 //! - [`util`]: atomic file output, deterministic random numbers, progress reporting.
 
 pub mod branch;
+pub mod ecosystem;
 pub mod edit;
 pub mod eval;
 pub mod graph;

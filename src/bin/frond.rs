@@ -157,6 +157,62 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Place many plants on a terrain (density-map half-toning, approximate instancing into a
+    /// few masters) and write the scene: scene.json and plants/master_NN.glb.
+    Scene {
+        /// Output folder (replaced atomically).
+        #[arg(long)]
+        out: PathBuf,
+        /// Plant glbs to place (default: built-in synthetic plants, see --variants).
+        #[arg(long = "plant")]
+        plants: Vec<PathBuf>,
+        /// Number of built-in synthetic plants (broadleaf and medium, alternating) when no
+        /// --plant is given.
+        #[arg(long, default_value_t = 12)]
+        variants: usize,
+        /// Number of plants to place.
+        #[arg(long, default_value_t = 1000)]
+        count: usize,
+        /// Field size in metres, WIDTHxDEPTH.
+        #[arg(long, default_value = "40x40", value_parser = parse_field_size)]
+        size: (f64, f64),
+        /// Grey height map (PNG); default: seeded fractal noise.
+        #[arg(long)]
+        heightmap: Option<PathBuf>,
+        /// Altitude of a white height-map pixel, metres.
+        #[arg(long, default_value_t = 2.0)]
+        height_scale: f64,
+        /// Grey density map (PNG, black = no plants); default: seeded fractal noise.
+        #[arg(long)]
+        density: Option<PathBuf>,
+        /// Master plants after approximate instancing (seed 003: 10–20 per species).
+        #[arg(long, default_value_t = 8)]
+        masters: usize,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
+    /// Render a fly-through of a scene offscreen and print per-frame time, draw calls and
+    /// triangles (with LOD, at full detail, or both for the speed-up).
+    Render {
+        /// scene.json written by `frond scene`.
+        #[arg(long)]
+        scene: PathBuf,
+        #[arg(long, default_value_t = 8)]
+        frames: usize,
+        /// Output folder: frames.csv, render_report.json (and PNGs with --save-frames).
+        #[arg(long)]
+        out: PathBuf,
+        #[arg(long, value_enum, default_value = "both")]
+        mode: RenderModeArg,
+        /// Image size WIDTHxHEIGHT.
+        #[arg(long, default_value = "1280x720", value_parser = parse_size)]
+        size: (u32, u32),
+        /// Screen-space error bound λ, pixels.
+        #[arg(long, default_value_t = 4.0)]
+        threshold_px: f64,
+        #[arg(long)]
+        save_frames: bool,
+    },
     /// Score a reconstruction (segmentation.ply, plant.glb) against synthetic ground truth.
     Eval {
         /// The synthetic dataset (with gt/).
@@ -177,6 +233,16 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum RenderModeArg {
+    /// Screen-space-error LOD selection.
+    Lod,
+    /// Every plant at full detail.
+    Full,
+    /// Both on the same path, for the speed-up.
+    Both,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -913,6 +979,207 @@ fn densify(scene_args: &SceneArgs, options: &frond::mvs::DensifyOptions, out: &P
     Ok(())
 }
 
+fn parse_field_size(text: &str) -> Result<(f64, f64), String> {
+    let (w, h) = text
+        .split_once('x')
+        .ok_or_else(|| format!("'{text}' is not WIDTHxDEPTH"))?;
+    let parse = |v: &str| match v.trim().parse::<f64>() {
+        Ok(x) if x > 0.0 && x.is_finite() => Ok(x),
+        _ => Err(format!("'{v}' is not a positive size in metres")),
+    };
+    Ok((parse(w)?, parse(h)?))
+}
+
+fn read_grey(path: &Path) -> Result<image::GrayImage> {
+    Ok(image::open(path)
+        .with_context(|| format!("reading {}", path.display()))?
+        .to_luma8())
+}
+
+fn scene_command(
+    out: &Path,
+    plants: &[PathBuf],
+    variants: usize,
+    options: &frond::ecosystem::SceneOptions,
+) -> Result<()> {
+    use frond::ecosystem::{SourcePlant, build_scene};
+    use frond::lod::asset::PlantAsset;
+    let progress = BarProgress::new();
+    let sources: Vec<SourcePlant> = if plants.is_empty() {
+        if variants == 0 {
+            bail!("--variants must be at least 1 when no --plant is given");
+        }
+        progress.stage("generating plants", variants as u64);
+        (0..variants)
+            .map(|i| {
+                let preset = if i % 2 == 0 {
+                    Preset::Broadleaf
+                } else {
+                    Preset::Medium
+                };
+                let seed = options.seed.wrapping_mul(1000).wrapping_add(i as u64);
+                let plant = frond::synth::generate_plant(preset, seed);
+                progress.advance(1);
+                SourcePlant {
+                    name: format!("{}_{seed}", preset.name()),
+                    asset: PlantAsset::from_model(&frond::synth::plant_model(&plant, 64)),
+                }
+            })
+            .collect()
+    } else {
+        plants
+            .iter()
+            .map(|path| {
+                Ok(SourcePlant {
+                    name: path.display().to_string(),
+                    asset: PlantAsset::read_glb(path)
+                        .with_context(|| format!("reading {}", path.display()))?,
+                })
+            })
+            .collect::<Result<_>>()?
+    };
+    progress.stage("placing plants", 0);
+    let (scene, master_sources) = build_scene(&sources, options).context("building the scene")?;
+    let staged = frond::util::atomic::StagedDir::new(out)
+        .with_context(|| format!("creating {}", out.display()))?;
+    std::fs::create_dir_all(staged.path().join("plants"))?;
+    for (plant, &source) in scene.plants.iter().zip(&master_sources) {
+        let path = staged.path().join(&plant.file);
+        let bytes = match plants.get(source) {
+            Some(original) => std::fs::read(original)
+                .with_context(|| format!("reading {}", original.display()))?,
+            None => {
+                let preset = if source % 2 == 0 {
+                    Preset::Broadleaf
+                } else {
+                    Preset::Medium
+                };
+                let seed = options.seed.wrapping_mul(1000).wrapping_add(source as u64);
+                frond::synth::plant_model(&frond::synth::generate_plant(preset, seed), 64).to_glb()
+            }
+        };
+        frond::util::atomic::write_atomic(&path, &bytes)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    let scene_path = staged.path().join("scene.json");
+    frond::util::atomic::write_atomic(&scene_path, serde_json::to_string(&scene)?.as_bytes())?;
+    staged
+        .commit()
+        .with_context(|| format!("moving the scene into {}", out.display()))?;
+    progress.bar.finish_and_clear();
+    let q = &scene.quantization;
+    println!(
+        "{}: {} plants on {:.0}×{:.0} m, {} source plants → {} masters ({:.0} instances per master, RMS log-size change {:.3})",
+        out.join("scene.json").display(),
+        scene.instances.len(),
+        scene.terrain.size_m[0],
+        scene.terrain.size_m[1],
+        q.source_plants,
+        q.masters,
+        q.reduction,
+        q.rms_log_change
+    );
+    Ok(())
+}
+
+fn render_command(
+    scene_path: &Path,
+    frames: usize,
+    out: &Path,
+    mode: RenderModeArg,
+    size: (u32, u32),
+    threshold_px: f64,
+    save_frames: bool,
+) -> Result<()> {
+    use frond::ecosystem::flythrough::{FlythroughOptions, Mode, run_flythrough};
+    if !(threshold_px.is_finite() && threshold_px > 0.0) {
+        bail!("--threshold-px must be positive, got {threshold_px}");
+    }
+    let scene = frond::ecosystem::EcosystemScene::read(scene_path)?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let mut options = FlythroughOptions {
+        frames,
+        width: size.0,
+        height: size.1,
+        mode: match mode {
+            RenderModeArg::Lod => Mode::Lod,
+            RenderModeArg::Full => Mode::Full,
+            RenderModeArg::Both => Mode::Both,
+        },
+        save_frames,
+        ..Default::default()
+    };
+    options.selection.threshold_px = threshold_px;
+    let progress = BarProgress::new();
+    let report = run_flythrough(&scene, scene_path, out, &options, &progress)
+        .with_context(|| format!("rendering {}", scene_path.display()))?;
+    progress.bar.finish_and_clear();
+    let mut csv = String::from(
+        "mode,frame,total_ms,cpu_ms,gpu_ms,draw_calls,instances_drawn,instances_culled,triangles,max_error_px,switches\n",
+    );
+    for r in &report.frames {
+        let mode = serde_json::to_value(r.mode)?;
+        csv.push_str(&format!(
+            "{},{},{:.2},{:.2},{:.2},{},{},{},{},{:.3},{}\n",
+            mode.as_str().unwrap_or("?"),
+            r.frame,
+            r.total_ms,
+            r.cpu_ms,
+            r.gpu_ms,
+            r.draw_calls,
+            r.instances_drawn,
+            r.instances_culled,
+            r.triangles,
+            r.max_error_px,
+            r.switches
+        ));
+        println!(
+            "{:>4} frame {:>3}: {:>9.1} ms  {:>5} draws  {:>5} plants drawn ({} culled)  {:>10} triangles  max error {:.2} px",
+            mode.as_str().unwrap_or("?"),
+            r.frame,
+            r.total_ms,
+            r.draw_calls,
+            r.instances_drawn,
+            r.instances_culled,
+            r.triangles,
+            r.max_error_px
+        );
+    }
+    frond::util::atomic::write_atomic(&out.join("frames.csv"), csv.as_bytes())?;
+    frond::util::atomic::write_atomic(
+        &out.join("render_report.json"),
+        serde_json::to_string_pretty(&report)?.as_bytes(),
+    )?;
+    println!(
+        "{} plants, {} masters, {}x{} on {}; prepared in {:.1} s",
+        report.instances,
+        report.masters,
+        report.width,
+        report.height,
+        report.adapter,
+        report.prepare_s
+    );
+    for s in &report.summaries {
+        println!(
+            "{:?}: mean {:.1} ms (median {:.1}), {:.0} triangles, {:.0} draw calls, max error {:.2} px, ≤ {} switches per plant per second",
+            s.mode,
+            s.mean_ms,
+            s.median_ms,
+            s.mean_triangles,
+            s.mean_draw_calls,
+            s.max_error_px,
+            s.max_switches_per_plant_per_second
+        );
+    }
+    if let (Some(speedup), Some(ratio)) = (report.speedup, report.triangle_ratio) {
+        println!(
+            "LOD vs full detail: {speedup:.1}× faster, {ratio:.1}× fewer triangles, {:.2} % of pixels differ by > 10 %",
+            100.0 * report.mean_differing_pixels.unwrap_or(0.0)
+        );
+    }
+    Ok(())
+}
+
 fn lod(
     input: &Path,
     out: &Path,
@@ -1063,6 +1330,47 @@ fn main() -> Result<()> {
             None => reconstruct(scene, params, *fit, *template, out),
         },
         Command::Replay { project, out } => replay(project, out.as_deref()),
+        Command::Scene {
+            out,
+            plants,
+            variants,
+            count,
+            size,
+            heightmap,
+            height_scale,
+            density,
+            masters,
+            seed,
+        } => {
+            let options = frond::ecosystem::SceneOptions {
+                count: *count,
+                size_m: [size.0, size.1],
+                heightmap: heightmap.as_deref().map(read_grey).transpose()?,
+                height_scale_m: *height_scale,
+                density: density.as_deref().map(read_grey).transpose()?,
+                masters: *masters,
+                seed: *seed,
+                ..Default::default()
+            };
+            scene_command(out, plants, *variants, &options)
+        }
+        Command::Render {
+            scene,
+            frames,
+            out,
+            mode,
+            size,
+            threshold_px,
+            save_frames,
+        } => render_command(
+            scene,
+            *frames,
+            out,
+            *mode,
+            *size,
+            *threshold_px,
+            *save_frames,
+        ),
         Command::Lod {
             input,
             out,

@@ -162,19 +162,27 @@ impl PlantAsset {
 /// all on the same atlas page).
 fn parts_from_glb(glb_parts: Vec<GlbPart>, textures: &mut Vec<RgbaImage>) -> Vec<AssetPart> {
     let mut merged: Vec<AssetPart> = Vec::new();
+    // One texture per distinct colour (a plant.glb has a material per branch).
+    let mut colour_textures: Vec<([f32; 4], Option<usize>, usize)> = Vec::new();
     for part in glb_parts {
-        let texture = match part.image.filter(|&i| i < textures.len()) {
-            Some(image) if part.color == [1.0; 4] => image,
-            Some(image) => {
-                // Fold the colour factor into a copy of the texture.
-                let tinted = tint(&textures[image], part.color);
-                textures.push(tinted);
-                textures.len() - 1
-            }
-            None => {
-                textures.push(RgbaImage::from_pixel(1, 1, srgb_texel(part.color)));
-                textures.len() - 1
-            }
+        let image = part.image.filter(|&i| i < textures.len());
+        let texture = match (image, part.color == [1.0; 4]) {
+            (Some(image), true) => image,
+            _ => match colour_textures
+                .iter()
+                .find(|(c, i, _)| *c == part.color && *i == image)
+            {
+                Some(&(_, _, texture)) => texture,
+                None => {
+                    // A colour alone, or a colour factor folded into a copy of the texture.
+                    textures.push(match image {
+                        Some(image) => tint(&textures[image], part.color),
+                        None => RgbaImage::from_pixel(1, 1, srgb_texel(part.color)),
+                    });
+                    colour_textures.push((part.color, image, textures.len() - 1));
+                    textures.len() - 1
+                }
+            },
         };
         let is_leaf = part.name.starts_with("leaf") || part.alpha_mask;
         let alpha_test = part.alpha_mask || (is_leaf && part.image.is_some());
@@ -240,6 +248,67 @@ mod tests {
         // Branch colour survives as a texel.
         let wood = read.parts.iter().find(|p| !p.is_leaf).unwrap();
         assert_eq!(read.textures[wood.texture].dimensions(), (1, 1));
+    }
+
+    /// Renders `asset` from a side view: colour and coverage.
+    fn side_view(asset: &PlantAsset) -> crate::render::RenderOutput {
+        let mut renderer = crate::render::Renderer::new().unwrap();
+        let mut gpu = renderer.new_scene();
+        for part in &asset.parts {
+            let texture = renderer.add_texture(&mut gpu, &asset.textures[part.texture]);
+            renderer
+                .add_mesh(&mut gpu, &part.mesh, texture, 1, part.alpha_test)
+                .unwrap();
+        }
+        let (center, radius) = asset.bounding_sphere().unwrap();
+        let center = center.cast::<f64>();
+        let eye = center + nalgebra::Vector3::new(0.3, -1.0, 0.5).normalize() * 4.0 * radius as f64;
+        let camera = crate::render::ViewCamera {
+            width: 160,
+            height: 120,
+            fx: 200.0,
+            fy: 200.0,
+            cx: 80.0,
+            cy: 60.0,
+            camera_from_world: crate::scene::synthetic::look_at(eye, center),
+            near: 0.01,
+            far: 10.0,
+        };
+        renderer
+            .render(&gpu, &camera, &crate::render::Lighting::default())
+            .unwrap()
+    }
+
+    #[test]
+    fn a_glb_read_asset_renders_like_the_model_it_was_written_from() {
+        let plant = generate_plant(Preset::Medium, 6);
+        let model = crate::synth::plant_model(&plant, 32);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("plant.glb");
+        std::fs::write(&path, model.to_glb()).unwrap();
+        let (a, b) = (
+            side_view(&PlantAsset::from_model(&model)),
+            side_view(&PlantAsset::read_glb(&path).unwrap()),
+        );
+        let covered = a.object_id.iter().filter(|&&id| id != 0).count();
+        let same_coverage = a
+            .object_id
+            .iter()
+            .zip(&b.object_id)
+            .filter(|(x, y)| x == y)
+            .count();
+        let differing = a
+            .color
+            .pixels()
+            .zip(b.color.pixels())
+            .filter(|(p, q)| (0..3).any(|c| p[c].abs_diff(q[c]) > 12))
+            .count();
+        assert!(covered > 500, "{covered}");
+        assert!(same_coverage as f64 > 0.995 * a.object_id.len() as f64);
+        assert!(
+            (differing as f64) < 0.02 * covered as f64,
+            "{differing} of {covered}"
+        );
     }
 
     #[test]

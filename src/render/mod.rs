@@ -327,7 +327,7 @@ fn instance_bytes(transforms: &[InstanceTransform]) -> Vec<u8> {
 fn alpha_coverage(image: &RgbaImage, scale: f32) -> f64 {
     let passing = image
         .pixels()
-        .filter(|p| p[3] as f32 * scale >= 127.5)
+        .filter(|p| (p[3] as f32 * scale).round().min(255.0) >= 128.0)
         .count();
     passing as f64 / (image.width() * image.height()).max(1) as f64
 }
@@ -344,7 +344,8 @@ fn preserve_alpha_coverage(level: &mut RgbaImage, target: f64) {
             hi = mid;
         }
     }
-    let scale = 0.5 * (lo + hi);
+    // `hi` reaches the target; texels are rounded as `alpha_coverage` counts them.
+    let scale = hi;
     for p in level.pixels_mut() {
         p[3] = (p[3] as f32 * scale).round().min(255.0) as u8;
     }
@@ -1504,6 +1505,39 @@ mod tests {
                 )
                 .is_err()
         );
+    }
+
+    #[test]
+    fn cutout_mips_keep_the_alpha_tested_coverage() {
+        // Opaque discs on a transparent page: box filtering halves edge alpha, and a level
+        // whose texels sit exactly at ½ must still pass the test.
+        let page = RgbaImage::from_fn(64, 64, |x, y| {
+            let (dx, dy) = (x as f32 - 20.0, y as f32 - 24.0);
+            let alpha = if dx * dx + dy * dy < 100.0 || (x >= 40 && y >= 40) {
+                255
+            } else {
+                0
+            };
+            image::Rgba([40, 160, 40, alpha])
+        });
+        let target = alpha_coverage(&page, 1.0);
+        let mut levels = mip_chain(&page);
+        for level in levels.iter_mut().skip(1) {
+            preserve_alpha_coverage(level, target);
+            let passing = level.pixels().filter(|p| p[3] >= 128).count() as f64
+                / (level.width() * level.height()) as f64;
+            let texel = 1.0 / (level.width() * level.height()) as f64;
+            assert!(
+                passing >= target - 1e-9 || passing + texel >= target,
+                "{passing} vs {target}"
+            );
+        }
+        // A uniformly opaque tile stays opaque at every level.
+        let mut solid = mip_chain(&RgbaImage::from_pixel(8, 8, image::Rgba([1, 2, 3, 255])));
+        for level in solid.iter_mut().skip(1) {
+            preserve_alpha_coverage(level, 1.0);
+            assert!(level.pixels().all(|p| p[3] >= 128));
+        }
     }
 
     #[test]
