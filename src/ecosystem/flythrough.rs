@@ -510,3 +510,63 @@ pub fn run_flythrough(
         frames: records,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn camera() -> ViewCamera {
+        ViewCamera {
+            width: 200,
+            height: 100,
+            fx: 100.0,
+            fy: 100.0,
+            cx: 100.0,
+            cy: 50.0,
+            camera_from_world: Isometry3::identity(),
+            near: 0.1,
+            far: 50.0,
+        }
+    }
+
+    #[test]
+    fn frustum_culling_keeps_exactly_the_spheres_that_reach_the_view() {
+        let camera = camera();
+        // In front, centred.
+        assert!(sphere_visible(&camera, &Point3::new(0.0, 0.0, 5.0), 0.1));
+        // Behind the eye, beyond the far plane.
+        assert!(!sphere_visible(&camera, &Point3::new(0.0, 0.0, -1.0), 0.5));
+        assert!(!sphere_visible(&camera, &Point3::new(0.0, 0.0, 51.0), 0.5));
+        // The right edge is at x = z (cx = fx): a sphere just outside is culled, one whose
+        // edge reaches inside is kept.
+        let z = 10.0;
+        let outside = Point3::new(z + 0.3 * 2f64.sqrt() + 0.01, 0.0, z);
+        assert!(!sphere_visible(&camera, &outside, 0.3));
+        assert!(sphere_visible(&camera, &outside, 0.4));
+        // The top edge at y = −z/2.
+        assert!(!sphere_visible(
+            &camera,
+            &Point3::new(0.0, -0.5 * z - 1.0, z),
+            0.3
+        ));
+        assert!(sphere_visible(
+            &camera,
+            &Point3::new(0.0, -0.5 * z - 0.2, z),
+            0.3
+        ));
+        // Every kept sphere projects near the image (its centre within its projected radius).
+        for k in 0..200 {
+            let p = Point3::new((k % 20) as f64 - 10.0, (k / 20) as f64 - 5.0, 4.0);
+            if sphere_visible(&camera, &p, 0.2) {
+                let (uv, _) = camera.project(&p).unwrap();
+                let margin = 0.2 * camera.fx / p.z * 1.5 + 1.0;
+                assert!(
+                    uv.x > -margin
+                        && uv.x < 200.0 + margin
+                        && uv.y > -margin
+                        && uv.y < 100.0 + margin
+                );
+            }
+        }
+    }
+}
