@@ -123,6 +123,9 @@ pub fn build_plant_lod(
             is_billboard: false,
         })
         .collect();
+    for level in levels.iter_mut().skip(1) {
+        prune_thin_wood(level);
+    }
     let mut textures = asset.textures.clone();
     if let (Some(renderer), Some(billboard)) = (renderer, &options.billboard) {
         let star = bake_star(renderer, asset, billboard)?;
@@ -151,6 +154,127 @@ pub fn build_plant_lod(
         center,
         radius,
     })
+}
+
+/// Connected components of `mesh` (triangles joined through shared vertices or vertices at
+/// the same position).
+fn components(mesh: &TriMesh) -> Vec<Vec<usize>> {
+    let mut parent: Vec<usize> = (0..mesh.positions.len()).collect();
+    fn root(parent: &mut [usize], mut v: usize) -> usize {
+        while parent[v] != v {
+            parent[v] = parent[parent[v]];
+            v = parent[v];
+        }
+        v
+    }
+    // Vertices at the same position are one (a cap's rim and its tube's end ring).
+    let mut first_at: std::collections::HashMap<[u32; 3], usize> = Default::default();
+    for (v, p) in mesh.positions.iter().enumerate() {
+        let first = *first_at
+            .entry([p.x.to_bits(), p.y.to_bits(), p.z.to_bits()])
+            .or_insert(v);
+        if first != v {
+            let (a, b) = (root(&mut parent, first), root(&mut parent, v));
+            parent[b] = a;
+        }
+    }
+    for tri in &mesh.triangles {
+        let a = root(&mut parent, tri[0] as usize);
+        for &w in &tri[1..] {
+            let b = root(&mut parent, w as usize);
+            if a != b {
+                parent[b] = a;
+            }
+        }
+    }
+    let mut by_root: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        by_root
+            .entry(root(&mut parent, tri[0] as usize))
+            .or_default()
+            .push(t);
+    }
+    by_root.into_values().collect()
+}
+
+/// Principal spreads of points (covariance eigenvalues, largest first) and the principal axis.
+fn principal(points: &[nalgebra::Vector3<f64>]) -> ([f64; 3], nalgebra::Vector3<f64>) {
+    let n = points.len().max(1) as f64;
+    let mean = points.iter().sum::<nalgebra::Vector3<f64>>() / n;
+    let mut covariance = nalgebra::Matrix3::<f64>::zeros();
+    for p in points {
+        let d = p - mean;
+        covariance += d * d.transpose() / n;
+    }
+    let eigen = nalgebra::SymmetricEigen::new(covariance);
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&i, &j| eigen.eigenvalues[j].total_cmp(&eigen.eigenvalues[i]));
+    (
+        order.map(|i| eigen.eigenvalues[i].max(0.0)),
+        eigen.eigenvectors.column(order[0]).into_owned(),
+    )
+}
+
+/// Thickness of a mesh component (a branch): the component is cut into 8 slabs along its
+/// principal axis, and each slab's cross-section spread (its two smaller principal variances)
+/// gives a local diameter 2·√(λ₂ + λ₃) (2r for a cylinder of radius r, bent or not); the
+/// median over slabs is returned.
+fn thickness(mesh: &TriMesh, triangles: &[usize]) -> f64 {
+    const SLABS: usize = 8;
+    let mut vertices: Vec<u32> = triangles.iter().flat_map(|&t| mesh.triangles[t]).collect();
+    vertices.sort_unstable();
+    vertices.dedup();
+    let points: Vec<nalgebra::Vector3<f64>> = vertices
+        .iter()
+        .map(|&v| mesh.positions[v as usize].coords.cast::<f64>())
+        .collect();
+    let (_, axis) = principal(&points);
+    let along: Vec<f64> = points.iter().map(|p| p.dot(&axis)).collect();
+    let (lo, hi) = along
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &t| {
+            (lo.min(t), hi.max(t))
+        });
+    let width = ((hi - lo) / SLABS as f64).max(1e-12);
+    let mut slabs: Vec<Vec<nalgebra::Vector3<f64>>> = vec![Vec::new(); SLABS];
+    for (p, t) in points.iter().zip(&along) {
+        slabs[(((t - lo) / width) as usize).min(SLABS - 1)].push(*p);
+    }
+    let mut diameters: Vec<f64> = slabs
+        .iter()
+        .filter(|slab| slab.len() >= 4)
+        .map(|slab| {
+            let (spread, _) = principal(slab);
+            2.0 * (spread[1] + spread[2]).sqrt()
+        })
+        .collect();
+    if diameters.is_empty() {
+        let (spread, _) = principal(&points);
+        return 2.0 * (spread[1] + spread[2]).sqrt();
+    }
+    diameters.sort_by(f64::total_cmp);
+    diameters[diameters.len() / 2]
+}
+
+/// Removes the branch components (twigs) of a simplified level that are thinner than the
+/// level's error μ: at the distance where the level is drawn they project narrower than λ,
+/// which is the screen error of leaving them out (a thin feature's error is its width, not
+/// its length). μ is unchanged since every pruned thickness is below it.
+fn prune_thin_wood(level: &mut PlantLevel) {
+    let limit = level.error_world;
+    for part in level.parts.iter_mut().filter(|p| !p.is_leaf) {
+        let groups = components(&part.mesh);
+        if groups.len() < 2 {
+            continue;
+        }
+        let kept: Vec<[u32; 3]> = groups
+            .iter()
+            .filter(|tris| thickness(&part.mesh, tris) >= limit)
+            .flat_map(|tris| tris.iter().map(|&t| part.mesh.triangles[t]))
+            .collect();
+        part.mesh.triangles = kept;
+    }
+    level.triangles = level.parts.iter().map(|p| p.mesh.triangles.len()).sum();
 }
 
 impl PlantLod {
@@ -353,6 +477,55 @@ mod tests {
         // A reader that ignores MSFT_lod sees the full plant only.
         let plain = PlantAsset::read_glb(&path).unwrap();
         assert_eq!(plain.triangles(), asset.triangles());
+    }
+
+    #[test]
+    fn twigs_thinner_than_a_levels_error_are_pruned_and_thick_wood_stays() {
+        use crate::branch::{CylinderMeshing, GeneralizedCylinder, Spline};
+        let cylinder = |radius: f64, x: f64| {
+            let skeleton = Spline::new(vec![
+                nalgebra::Point3::new(x, 0.0, 0.0),
+                nalgebra::Point3::new(x, 0.05, 0.2),
+                nalgebra::Point3::new(x, 0.0, 0.4),
+            ])
+            .unwrap();
+            GeneralizedCylinder::new(skeleton, radius, radius).mesh(&CylinderMeshing::default())
+        };
+        let (stem, twig) = (cylinder(0.01, 0.0), cylinder(0.001, 0.1));
+        let stem_thickness = thickness(&stem, &(0..stem.triangles.len()).collect::<Vec<_>>());
+        let twig_thickness = thickness(&twig, &(0..twig.triangles.len()).collect::<Vec<_>>());
+        // Diameters 20 mm and 2 mm, bent by a 50 mm sagitta.
+        assert!((stem_thickness - 0.02).abs() < 0.004, "{stem_thickness}");
+        assert!((twig_thickness - 0.002).abs() < 0.0004, "{twig_thickness}");
+        let mut wood = stem.clone();
+        wood.append(&twig);
+        let part = |mesh: TriMesh, is_leaf: bool| AssetPart {
+            name: "p".into(),
+            mesh,
+            texture: 0,
+            alpha_test: false,
+            is_leaf,
+        };
+        let mut level = PlantLevel {
+            parts: vec![part(wood.clone(), false), part(twig.clone(), true)],
+            error_world: twig_thickness * 1.01,
+            triangles: 0,
+            is_billboard: false,
+        };
+        prune_thin_wood(&mut level);
+        assert_eq!(level.parts[0].mesh.triangles.len(), stem.triangles.len());
+        // Leaves are never pruned.
+        assert_eq!(level.parts[1].mesh.triangles.len(), twig.triangles.len());
+        assert_eq!(level.triangles, stem.triangles.len() + twig.triangles.len());
+        // Below the twig's thickness nothing goes.
+        let mut fine = PlantLevel {
+            parts: vec![part(wood.clone(), false)],
+            error_world: twig_thickness * 0.99,
+            triangles: 0,
+            is_billboard: false,
+        };
+        prune_thin_wood(&mut fine);
+        assert_eq!(fine.triangles, wood.triangles.len());
     }
 
     #[test]
