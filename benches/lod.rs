@@ -12,7 +12,7 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use frond::branch::CylinderMeshing;
 use frond::eval::geometry::symmetric_chamfer;
 use frond::lod::chain::{ChainOptions, build_chain};
-use frond::lod::simplify::{SimplifyOptions, simplify};
+use frond::lod::simplify::{SimplifyOptions, simplify, simplify_meshopt};
 use frond::mesh::TriMesh;
 use frond::render::{Lighting, Renderer, ViewCamera};
 use frond::synth::dataset::ring_cameras;
@@ -63,20 +63,7 @@ fn mean_iou(a: &[Vec<bool>], b: &[Vec<bool>]) -> f64 {
 }
 
 fn meshopt_simplify(mesh: &TriMesh, target_triangles: usize) -> TriMesh {
-    let bytes = meshopt::typed_to_bytes(&mesh.positions);
-    let adapter = meshopt::VertexDataAdapter::new(bytes, 12, 0).expect("positions adapter");
-    let indices: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
-    let kept = meshopt::simplify(
-        &indices,
-        &adapter,
-        target_triangles * 3,
-        1.0,
-        meshopt::SimplifyOptions::None,
-        None,
-    );
-    let mut out = mesh.clone();
-    out.triangles = kept.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-    out
+    simplify_meshopt(mesh, target_triangles).expect("valid mesh")
 }
 
 /// 8 views around a mesh's bounding sphere (25° above the horizon, 480×360).

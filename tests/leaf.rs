@@ -6,7 +6,6 @@
 mod common;
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::sync::OnceLock;
 
 use assert_cmd::cargo::cargo_bin_cmd;
@@ -50,31 +49,6 @@ fn reconstruction() -> &'static Path {
 
 fn read_json(path: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
-
-fn repo_file(relative: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join(relative)
-}
-
-/// Runs a checker script; its absence on this machine is a failure (scripts/setup.sh
-/// installs the tools into .tools/).
-fn run_checker(program: &str, script: &str, file: &Path) -> (bool, String) {
-    let output = Command::new(program)
-        .arg(repo_file(script))
-        .arg(file)
-        .output()
-        .unwrap_or_else(|e| panic!("{program} does not run ({e}): run scripts/setup.sh"));
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&output.stdout),
-        String::from_utf8_lossy(&output.stderr)
-    );
-    assert_ne!(
-        output.status.code(),
-        Some(2),
-        "{script} could not start: {text}"
-    );
-    (output.status.success(), text)
 }
 
 #[test]
@@ -164,10 +138,10 @@ fn reconstructed_leaves_meet_the_accuracy_targets() {
 #[test]
 fn exported_glb_passes_the_khronos_validator_and_a_python_reader() {
     let glb = reconstruction().join("plant.glb");
-    let (valid, text) = run_checker("node", "scripts/validate_gltf.js", &glb);
+    let (valid, text) = common::run_checker("node", "scripts/validate_gltf.js", &glb);
     assert!(valid, "validator: {text}");
     assert!(text.contains(": 0 errors"), "{text}");
-    let (read, text) = run_checker("python3", "scripts/read_gltf.py", &glb);
+    let (read, text) = common::run_checker("python3", "scripts/read_gltf.py", &glb);
     assert!(read, "reader: {text}");
     let summary: Value = serde_json::from_str(text.trim()).unwrap();
     let nodes: Vec<&str> = summary["nodes"]
@@ -218,9 +192,9 @@ fn the_checkers_catch_a_broken_glb() {
     broken[8..12].copy_from_slice(&total.to_le_bytes());
     let path = dir.path().join("broken.glb");
     std::fs::write(&path, broken).unwrap();
-    let (valid, text) = run_checker("node", "scripts/validate_gltf.js", &path);
+    let (valid, text) = common::run_checker("node", "scripts/validate_gltf.js", &path);
     assert!(!valid, "the validator accepted a broken file: {text}");
-    let (read, text) = run_checker("python3", "scripts/read_gltf.py", &path);
+    let (read, text) = common::run_checker("python3", "scripts/read_gltf.py", &path);
     assert!(!read, "the reader accepted a broken file: {text}");
 }
 
@@ -267,7 +241,8 @@ fn missing_photos_are_reported_not_fatal() {
             assert!(copy.join("images").join(&name).is_file(), "{name} chosen");
         }
     }
-    let (valid, text) = run_checker("node", "scripts/validate_gltf.js", &out.join("plant.glb"));
+    let (valid, text) =
+        common::run_checker("node", "scripts/validate_gltf.js", &out.join("plant.glb"));
     assert!(valid, "{text}");
 }
 

@@ -1,33 +1,12 @@
 //! `frond lod`: a plant glb in, a glb with MSFT_lod out, accepted by the Khronos validator and
 //! read back level by level.
 
-use std::path::Path;
-use std::process::Command;
+mod common;
 
 use assert_cmd::cargo::cargo_bin_cmd;
 use frond::lod::plant::PlantLod;
 use frond::synth::{Preset, generate_plant, plant_model};
 use serde_json::Value;
-
-fn validate(file: &Path) -> (bool, String) {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/validate_gltf.js");
-    let output = Command::new("node")
-        .arg(script)
-        .arg(file)
-        .output()
-        .unwrap_or_else(|e| panic!("node does not run ({e}): run scripts/setup.sh"));
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&output.stdout),
-        String::from_utf8_lossy(&output.stderr)
-    );
-    assert_ne!(
-        output.status.code(),
-        Some(2),
-        "validator could not start: {text}"
-    );
-    (output.status.success(), text)
-}
 
 #[test]
 fn lod_writes_msft_lod_that_the_khronos_validator_accepts() {
@@ -61,7 +40,7 @@ fn lod_writes_msft_lod_that_the_khronos_validator_accepts() {
     assert_eq!(levels[4]["is_billboard"], true);
     assert_eq!(levels[4]["triangles"], 6);
 
-    let (valid, text) = validate(&output);
+    let (valid, text) = common::run_checker("node", "scripts/validate_gltf.js", &output);
     assert!(valid && text.contains(": 0 errors"), "validator: {text}");
 
     let lod = PlantLod::read_glb(&output, 200).unwrap();

@@ -154,6 +154,9 @@ enum Command {
         /// Texel height of each billboard tile (0: no billboard level).
         #[arg(long, default_value_t = 256)]
         billboard_tile: u32,
+        /// frond (half-edge collapse, better silhouettes) or meshopt (meshoptimizer, faster).
+        #[arg(long, value_enum, default_value = "frond")]
+        simplifier: SimplifierArg,
         #[arg(long)]
         json: bool,
     },
@@ -233,6 +236,12 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum SimplifierArg {
+    Frond,
+    Meshopt,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -996,6 +1005,22 @@ fn read_grey(path: &Path) -> Result<image::GrayImage> {
         .to_luma8())
 }
 
+/// Built-in source plant `index` of a scene seeded `seed`: broadleaf and medium synthetic
+/// plants in turn (name, model with 64² leaf textures).
+fn built_in_plant(seed: u64, index: usize) -> (String, frond::model::PlantModel) {
+    let preset = if index.is_multiple_of(2) {
+        Preset::Broadleaf
+    } else {
+        Preset::Medium
+    };
+    let plant_seed = seed.wrapping_mul(1000).wrapping_add(index as u64);
+    let plant = frond::synth::generate_plant(preset, plant_seed);
+    (
+        format!("{}_{plant_seed}", preset.name()),
+        frond::synth::plant_model(&plant, 64),
+    )
+}
+
 fn scene_command(
     out: &Path,
     plants: &[PathBuf],
@@ -1012,17 +1037,11 @@ fn scene_command(
         progress.stage("generating plants", variants as u64);
         (0..variants)
             .map(|i| {
-                let preset = if i % 2 == 0 {
-                    Preset::Broadleaf
-                } else {
-                    Preset::Medium
-                };
-                let seed = options.seed.wrapping_mul(1000).wrapping_add(i as u64);
-                let plant = frond::synth::generate_plant(preset, seed);
+                let (name, model) = built_in_plant(options.seed, i);
                 progress.advance(1);
                 SourcePlant {
-                    name: format!("{}_{seed}", preset.name()),
-                    asset: PlantAsset::from_model(&frond::synth::plant_model(&plant, 64)),
+                    name,
+                    asset: PlantAsset::from_model(&model),
                 }
             })
             .collect()
@@ -1048,15 +1067,7 @@ fn scene_command(
         let bytes = match plants.get(source) {
             Some(original) => std::fs::read(original)
                 .with_context(|| format!("reading {}", original.display()))?,
-            None => {
-                let preset = if source % 2 == 0 {
-                    Preset::Broadleaf
-                } else {
-                    Preset::Medium
-                };
-                let seed = options.seed.wrapping_mul(1000).wrapping_add(source as u64);
-                frond::synth::plant_model(&frond::synth::generate_plant(preset, seed), 64).to_glb()
-            }
+            None => built_in_plant(options.seed, source).1.to_glb(),
         };
         frond::util::atomic::write_atomic(&path, &bytes)
             .with_context(|| format!("writing {}", path.display()))?;
@@ -1186,6 +1197,7 @@ fn lod(
     threshold_px: f64,
     ratios: &[f64],
     billboard_tile: u32,
+    simplifier: frond::lod::chain::Simplifier,
     json: bool,
 ) -> Result<()> {
     use frond::lod::plant::{PlantLodOptions, build_plant_lod};
@@ -1199,6 +1211,7 @@ fn lod(
         .with_context(|| format!("reading {}", input.display()))?;
     let options = PlantLodOptions {
         chain: frond::lod::chain::ChainOptions {
+            simplifier,
             ratios: ratios.to_vec(),
             ..Default::default()
         },
@@ -1377,8 +1390,20 @@ fn main() -> Result<()> {
             threshold_px,
             ratios,
             billboard_tile,
+            simplifier,
             json,
-        } => lod(input, out, *threshold_px, ratios, *billboard_tile, *json),
+        } => lod(
+            input,
+            out,
+            *threshold_px,
+            ratios,
+            *billboard_tile,
+            match simplifier {
+                SimplifierArg::Frond => frond::lod::chain::Simplifier::Frond,
+                SimplifierArg::Meshopt => frond::lod::chain::Simplifier::Meshopt,
+            },
+            *json,
+        ),
         Command::Eval {
             gt,
             pred,

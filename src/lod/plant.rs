@@ -442,6 +442,7 @@ mod tests {
                 ratios: vec![0.25, 0.05],
                 error_samples: 500,
                 seed: 3,
+                ..Default::default()
             },
             billboard: Some(BillboardOptions {
                 quads: 3,

@@ -352,6 +352,71 @@ fn queue_best(work: &Work, u: u32, skip: &[u32], queue: &mut CollapseQueue) {
     }
 }
 
+/// `triangles` (indices into `mesh`) over only the vertices they use, attributes carried over.
+pub fn compact(mesh: &TriMesh, triangles: &[[u32; 3]]) -> TriMesh {
+    let mut new_index = vec![u32::MAX; mesh.positions.len()];
+    let mut out = TriMesh::default();
+    for tri in triangles {
+        let mut corners = [0u32; 3];
+        for (k, &v) in tri.iter().enumerate() {
+            if new_index[v as usize] == u32::MAX {
+                new_index[v as usize] = out.positions.len() as u32;
+                out.positions.push(mesh.positions[v as usize]);
+                if let Some(n) = mesh.normals.get(v as usize) {
+                    out.normals.push(*n);
+                }
+                out.uvs
+                    .push(mesh.uvs.get(v as usize).copied().unwrap_or([0.0, 0.0]));
+            }
+            corners[k] = new_index[v as usize];
+        }
+        out.triangles.push(corners);
+    }
+    if out.normals.len() != out.positions.len() {
+        out.compute_normals();
+    }
+    out
+}
+
+/// meshoptimizer's edge-collapse simplifier (through the `meshopt` crate) to about
+/// `target_triangles`: about 4× faster than [`simplify`], with larger errors on plant
+/// silhouettes (`benches/lod.rs`). Indices must be in range (checked).
+pub fn simplify_meshopt(mesh: &TriMesh, target_triangles: usize) -> Result<TriMesh, SimplifyError> {
+    let count = mesh.positions.len();
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        if let Some(&vertex) = tri.iter().find(|&&v| v as usize >= count) {
+            return Err(SimplifyError::BadIndex {
+                triangle: t,
+                vertex,
+                count,
+            });
+        }
+    }
+    if let Some(i) = mesh
+        .positions
+        .iter()
+        .position(|p| !p.iter().all(|c| c.is_finite()))
+    {
+        return Err(SimplifyError::NonFinite(i));
+    }
+    let positions: Vec<[f32; 3]> = mesh.positions.iter().map(|p| [p.x, p.y, p.z]).collect();
+    let Ok(adapter) = meshopt::VertexDataAdapter::new(meshopt::typed_to_bytes(&positions), 12, 0)
+    else {
+        return Ok(mesh.clone());
+    };
+    let indices: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
+    let kept = meshopt::simplify(
+        &indices,
+        &adapter,
+        target_triangles * 3,
+        1.0,
+        meshopt::SimplifyOptions::None,
+        None,
+    );
+    let triangles: Vec<[u32; 3]> = kept.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    Ok(compact(mesh, &triangles))
+}
+
 /// Simplifies `mesh` to about `options.target_triangles` triangles by half-edge collapses
 /// (fewer collapses if every remaining one is refused). Deterministic.
 pub fn simplify(mesh: &TriMesh, options: &SimplifyOptions) -> Result<Simplified, SimplifyError> {
@@ -480,31 +545,14 @@ pub fn simplify(mesh: &TriMesh, options: &SimplifyOptions) -> Result<Simplified,
         }
     }
 
-    // Compact: surviving triangles over the vertices they use, attributes carried over.
-    let mut new_index = vec![u32::MAX; count];
-    let mut out = TriMesh::default();
-    for (t, tri) in work.triangles.iter().enumerate() {
-        if !work.alive[t] {
-            continue;
-        }
-        let mut corners = [0u32; 3];
-        for (k, &v) in tri.iter().enumerate() {
-            if new_index[v as usize] == u32::MAX {
-                new_index[v as usize] = out.positions.len() as u32;
-                out.positions.push(mesh.positions[v as usize]);
-                if let Some(n) = mesh.normals.get(v as usize) {
-                    out.normals.push(*n);
-                }
-                out.uvs
-                    .push(mesh.uvs.get(v as usize).copied().unwrap_or([0.0, 0.0]));
-            }
-            corners[k] = new_index[v as usize];
-        }
-        out.triangles.push(corners);
-    }
-    if out.normals.len() != out.positions.len() {
-        out.compute_normals();
-    }
+    let kept: Vec<[u32; 3]> = work
+        .triangles
+        .iter()
+        .zip(&work.alive)
+        .filter(|(_, alive)| **alive)
+        .map(|(tri, _)| *tri)
+        .collect();
+    let out = compact(mesh, &kept);
     Ok(Simplified {
         mesh: out,
         collapses,

@@ -1003,22 +1003,7 @@ impl Renderer {
             .create_view(&wgpu::TextureViewDescriptor::default());
         let mut stats = FrameStats::default();
         {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("instanced colour"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &targets.color_msaa,
-                    depth_slice: None,
-                    resolve_target: Some(&resolved_view),
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(SKY),
-                        store: wgpu::StoreOp::Discard,
-                    },
-                })],
-                depth_stencil_attachment: Some(cleared_depth(&targets.depth_msaa)),
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
+            let mut pass = begin_color_pass(&mut encoder, targets, &resolved_view, SKY);
             let (draws, triangles) = draw_meshes(
                 &mut pass,
                 &self.color_pipeline,
@@ -1076,27 +1061,8 @@ impl Renderer {
             .color_resolved
             .create_view(&wgpu::TextureViewDescriptor::default());
         {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("colour"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &targets.color_msaa,
-                    depth_slice: None,
-                    resolve_target: Some(&resolved_view),
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color {
-                            r: 0.0,
-                            g: 0.0,
-                            b: 0.0,
-                            a: 1.0,
-                        }),
-                        store: wgpu::StoreOp::Discard,
-                    },
-                })],
-                depth_stencil_attachment: Some(cleared_depth(&targets.depth_msaa)),
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
+            let mut pass =
+                begin_color_pass(&mut encoder, targets, &resolved_view, wgpu::Color::BLACK);
             draw_meshes(
                 &mut pass,
                 &self.color_pipeline,
@@ -1172,6 +1138,31 @@ impl Renderer {
             object_id,
         })
     }
+}
+
+/// The multisampled colour pass (resolved into `resolved_view`), cleared to `clear`.
+fn begin_color_pass<'a>(
+    encoder: &'a mut wgpu::CommandEncoder,
+    targets: &'a Targets,
+    resolved_view: &'a wgpu::TextureView,
+    clear: wgpu::Color,
+) -> wgpu::RenderPass<'a> {
+    encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some("colour"),
+        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+            view: &targets.color_msaa,
+            depth_slice: None,
+            resolve_target: Some(resolved_view),
+            ops: wgpu::Operations {
+                load: wgpu::LoadOp::Clear(clear),
+                store: wgpu::StoreOp::Discard,
+            },
+        })],
+        depth_stencil_attachment: Some(cleared_depth(&targets.depth_msaa)),
+        timestamp_writes: None,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    })
 }
 
 /// A depth attachment cleared to the far plane and not kept after the pass.

@@ -70,3 +70,24 @@ pub fn analyze(dir: &Path) -> std::collections::HashMap<String, f64> {
         })
         .collect()
 }
+
+/// Runs `program script file` (a checker script of the repository); returns whether it
+/// accepted the file and its output. Panics when the checker cannot start (exit code 2).
+pub fn run_checker(program: &str, script: &str, file: &Path) -> (bool, String) {
+    let output = Command::new(program)
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join(script))
+        .arg(file)
+        .output()
+        .unwrap_or_else(|e| panic!("{program} does not run ({e}): run scripts/setup.sh"));
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert_ne!(
+        output.status.code(),
+        Some(2),
+        "{script} could not start: {text}"
+    );
+    (output.status.success(), text)
+}
