@@ -540,8 +540,24 @@ pub fn simplify(mesh: &TriMesh, options: &SimplifyOptions) -> Result<Simplified,
         queue.remove(u);
         collapses += 1;
         for w in ring {
-            skip[w as usize].clear();
-            queue_best(&work, w, &[], &mut queue);
+            let wi = w as usize;
+            let queued = queue.position[wi] != ABSENT;
+            if w == v || !queued || queue.target[wi] == u || !skip[wi].is_empty() {
+                skip[wi].clear();
+                queue_best(&work, w, &[], &mut queue);
+            } else {
+                // w's other candidates and their costs are unchanged: only u left and v (now a
+                // neighbour) joined, so the best is the old best or v — the same choice a full
+                // re-evaluation makes.
+                let cost = work.cost(w, v);
+                if cost
+                    .total_cmp(&queue.cost[wi])
+                    .then(v.cmp(&queue.target[wi]))
+                    .is_lt()
+                {
+                    queue.set(w, cost, v);
+                }
+            }
         }
     }
 
