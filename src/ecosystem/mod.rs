@@ -198,6 +198,24 @@ pub fn build_scene(
         .heightmap
         .clone()
         .unwrap_or_else(|| fractal_noise(resolution, 4, options.seed ^ 0x7e44));
+    if heightmap.width() < 2 || heightmap.height() < 2 {
+        return Err(EcosystemError::Invalid {
+            path: "height map".into(),
+            message: format!(
+                "{}×{} pixels; a terrain needs at least 2×2",
+                heightmap.width(),
+                heightmap.height()
+            ),
+        });
+    }
+    if !(options.size_m.iter().all(|s| s.is_finite() && *s > 0.0)
+        && options.height_scale_m.is_finite())
+    {
+        return Err(EcosystemError::Invalid {
+            path: "scene options".into(),
+            message: "field size must be positive and the height scale finite".into(),
+        });
+    }
     let terrain = Terrain::from_heightmap(&heightmap, options.size_m, options.height_scale_m);
     let density = options
         .density
@@ -492,6 +510,12 @@ mod tests {
             },
         )
         .unwrap();
+        let tiny = SceneOptions {
+            heightmap: Some(GrayImage::new(1, 1)),
+            ..Default::default()
+        };
+        let err = build_scene(&sources, &tiny).unwrap_err().to_string();
+        assert!(err.contains("height map") && err.contains("1×1"), "{err}");
         scene.instances[3].plant = 99;
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("scene.json");
