@@ -352,6 +352,28 @@ fn queue_best(work: &Work, u: u32, skip: &[u32], queue: &mut CollapseQueue) {
     }
 }
 
+/// Every index in range and every position finite.
+fn check_input(mesh: &TriMesh) -> Result<(), SimplifyError> {
+    let count = mesh.positions.len();
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        if let Some(&vertex) = tri.iter().find(|&&v| v as usize >= count) {
+            return Err(SimplifyError::BadIndex {
+                triangle: t,
+                vertex,
+                count,
+            });
+        }
+    }
+    match mesh
+        .positions
+        .iter()
+        .position(|p| !p.iter().all(|c| c.is_finite()))
+    {
+        Some(i) => Err(SimplifyError::NonFinite(i)),
+        None => Ok(()),
+    }
+}
+
 /// `triangles` (indices into `mesh`) over only the vertices they use, attributes carried over.
 pub fn compact(mesh: &TriMesh, triangles: &[[u32; 3]]) -> TriMesh {
     let mut new_index = vec![u32::MAX; mesh.positions.len()];
@@ -382,23 +404,7 @@ pub fn compact(mesh: &TriMesh, triangles: &[[u32; 3]]) -> TriMesh {
 /// `target_triangles`: about 4× faster than [`simplify`], with larger errors on plant
 /// silhouettes (`benches/lod.rs`). Indices must be in range (checked).
 pub fn simplify_meshopt(mesh: &TriMesh, target_triangles: usize) -> Result<TriMesh, SimplifyError> {
-    let count = mesh.positions.len();
-    for (t, tri) in mesh.triangles.iter().enumerate() {
-        if let Some(&vertex) = tri.iter().find(|&&v| v as usize >= count) {
-            return Err(SimplifyError::BadIndex {
-                triangle: t,
-                vertex,
-                count,
-            });
-        }
-    }
-    if let Some(i) = mesh
-        .positions
-        .iter()
-        .position(|p| !p.iter().all(|c| c.is_finite()))
-    {
-        return Err(SimplifyError::NonFinite(i));
-    }
+    check_input(mesh)?;
     let positions: Vec<[f32; 3]> = mesh.positions.iter().map(|p| [p.x, p.y, p.z]).collect();
     let Ok(adapter) = meshopt::VertexDataAdapter::new(meshopt::typed_to_bytes(&positions), 12, 0)
     else {
@@ -421,22 +427,7 @@ pub fn simplify_meshopt(mesh: &TriMesh, target_triangles: usize) -> Result<TriMe
 /// (fewer collapses if every remaining one is refused). Deterministic.
 pub fn simplify(mesh: &TriMesh, options: &SimplifyOptions) -> Result<Simplified, SimplifyError> {
     let count = mesh.positions.len();
-    for (t, tri) in mesh.triangles.iter().enumerate() {
-        if let Some(&vertex) = tri.iter().find(|&&v| v as usize >= count) {
-            return Err(SimplifyError::BadIndex {
-                triangle: t,
-                vertex,
-                count,
-            });
-        }
-    }
-    if let Some(i) = mesh
-        .positions
-        .iter()
-        .position(|p| !p.iter().all(|c| c.is_finite()))
-    {
-        return Err(SimplifyError::NonFinite(i));
-    }
+    check_input(mesh)?;
     let positions: Vec<Point3<f64>> = mesh.positions.iter().map(|p| p.cast()).collect();
     let mut work = Work {
         triangles: mesh.triangles.clone(),
