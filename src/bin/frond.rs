@@ -824,6 +824,7 @@ fn reconstruct(
             }))
             .collect(),
         branches: model_branches,
+        up: Some(session.segmentation().foreground.up.into()),
     };
     let clock = std::time::Instant::now();
     let export = model

@@ -9,7 +9,7 @@ use nalgebra::Point3;
 
 use crate::mesh::TriMesh;
 use crate::model::PlantModel;
-use crate::model::gltf::{GlbPart, GltfError, read_glb_parts};
+use crate::model::gltf::{GlbPart, GltfError, read_glb_parts, read_glb_up};
 use crate::model::plant::Atlas;
 
 /// One material's geometry.
@@ -99,7 +99,10 @@ impl PlantAsset {
         asset
     }
 
-    /// Reads a `plant.glb`: every primitive of the default scene becomes a part; a part
+    /// Reads a `plant.glb` into the plant's upright frame (a glb that records its up
+    /// direction, as `frond reconstruct`'s does, is rotated about the origin so that up is
+    /// +z; one that does not is taken as z-up). Every primitive of the default scene becomes a
+    /// part; a part
     /// without a texture gets a 1×1 texture of its base colour. Parts named `leaf_*` (or
     /// with cut-out materials) count as leaves.
     pub fn read_glb(path: &Path) -> Result<Self, GltfError> {
@@ -109,7 +112,10 @@ impl PlantAsset {
         })?;
         let glb = read_glb_parts(&bytes, path)?;
         let mut textures = glb.images;
-        let parts = parts_from_glb(glb.parts, &mut textures);
+        let mut parts = parts_from_glb(glb.parts, &mut textures);
+        if let Some(up) = read_glb_up(&bytes, path)? {
+            rotate_upright(&mut parts, &up);
+        }
         Ok(Self { parts, textures })
     }
 
@@ -153,6 +159,30 @@ impl PlantAsset {
             .map(|p| (p - center).norm())
             .fold(0.0f32, f32::max);
         Some((center, radius))
+    }
+}
+
+/// Rotates `parts` about the origin so that `up` becomes +z (positions and normals).
+pub fn rotate_upright(parts: &mut [AssetPart], up: &nalgebra::Vector3<f64>) {
+    let rotation = nalgebra::UnitQuaternion::rotation_between(up, &nalgebra::Vector3::z())
+        .unwrap_or_else(|| {
+            // Exactly upside down: half a turn about x.
+            nalgebra::UnitQuaternion::from_axis_angle(
+                &nalgebra::Vector3::x_axis(),
+                std::f64::consts::PI,
+            )
+        })
+        .cast::<f32>();
+    if rotation.angle() == 0.0 {
+        return;
+    }
+    for part in parts {
+        for p in &mut part.mesh.positions {
+            *p = rotation * *p;
+        }
+        for n in &mut part.mesh.normals {
+            *n = rotation * *n;
+        }
     }
 }
 
@@ -309,6 +339,51 @@ mod tests {
             (differing as f64) < 0.02 * covered as f64,
             "{differing} of {covered}"
         );
+    }
+
+    #[test]
+    fn a_plant_recorded_with_a_tilted_up_is_read_upright() {
+        let plant = generate_plant(Preset::Broadleaf, 8);
+        let mut model = crate::synth::plant_model(&plant, 16);
+        let upright = PlantAsset::from_model(&model);
+        // The same plant in a COLMAP-like frame: tilted, with its up recorded.
+        let tilt = nalgebra::UnitQuaternion::from_euler_angles(1.1, -0.4, 2.0);
+        for leaf in &mut model.leaves {
+            leaf.mesh.transform(&nalgebra::Isometry3::from_parts(
+                nalgebra::Translation3::identity(),
+                tilt.cast::<f32>(),
+            ));
+        }
+        for branch in &mut model.branches {
+            branch.mesh.transform(&nalgebra::Isometry3::from_parts(
+                nalgebra::Translation3::identity(),
+                tilt.cast::<f32>(),
+            ));
+        }
+        model.up = Some((tilt * nalgebra::Vector3::z()).into());
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("plant.glb");
+        std::fs::write(&path, model.to_glb()).unwrap();
+        let read = PlantAsset::read_glb(&path).unwrap();
+        let ((lo0, hi0), (lo1, hi1)) = (upright.bounds().unwrap(), read.bounds().unwrap());
+        // Upright again up to a turn about z: the height range is the original one.
+        assert!(
+            (lo0.z - lo1.z).abs() < 1e-4 && (hi0.z - hi1.z).abs() < 1e-4,
+            "{lo1:?} {hi1:?}"
+        );
+        // Every vertex keeps its height (the heights, sorted, agree).
+        let heights = |asset: &PlantAsset| {
+            let mut z: Vec<f32> = asset
+                .parts
+                .iter()
+                .flat_map(|p| p.mesh.positions.iter().map(|q| q.z))
+                .collect();
+            z.sort_by(f32::total_cmp);
+            z
+        };
+        let (z0, z1) = (heights(&upright), heights(&read));
+        assert_eq!(z0.len(), z1.len());
+        assert!(z0.iter().zip(&z1).all(|(a, b)| (a - b).abs() < 1e-4));
     }
 
     #[test]

@@ -375,18 +375,23 @@ impl PlantLod {
     }
 
     /// Reads a LOD glb written by [`PlantLod::to_glb`], or any glb (with or without
-    /// `MSFT_lod`): levels without `frond_lod` errors get theirs measured against L0.
+    /// `MSFT_lod`): levels without `frond_lod` errors get theirs measured against L0. Like
+    /// [`PlantAsset::read_glb`], the levels come in the plant's upright frame.
     pub fn read_glb(path: &Path, error_samples: usize) -> Result<Self, LodError> {
         let bytes = std::fs::read(path).map_err(|e| GltfError::Invalid {
             path: path.display().to_string(),
             message: e.to_string(),
         })?;
         let glb = read_glb_lod(&bytes, path)?;
+        let up = crate::model::gltf::read_glb_up(&bytes, path)?;
         let stored = &glb.extras["frond_lod"]["levels"];
         let mut textures = glb.images;
         let mut levels = Vec::with_capacity(glb.levels.len());
         for (i, parts) in glb.levels.into_iter().enumerate() {
-            let asset = PlantAsset::from_glb_parts(parts, &mut textures);
+            let mut asset = PlantAsset::from_glb_parts(parts, &mut textures);
+            if let Some(up) = &up {
+                super::asset::rotate_upright(&mut asset.parts, up);
+            }
             let is_billboard = stored[i]["is_billboard"].as_bool().unwrap_or(false);
             levels.push((asset, stored[i]["error_m"].as_f64(), is_billboard));
         }

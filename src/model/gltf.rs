@@ -144,7 +144,11 @@ pub struct GlbBuilder {
     nodes: Vec<Value>,
     scene_nodes: Vec<usize>,
     extensions_used: Vec<String>,
+    asset_extras: Value,
 }
+
+/// Key of the plant's up direction (world frame) in a glb's `asset.extras`.
+pub const UP_KEY: &str = "frond_up";
 
 impl GlbBuilder {
     pub fn new(generator: &str) -> Self {
@@ -162,7 +166,13 @@ impl GlbBuilder {
             nodes: Vec::new(),
             scene_nodes: Vec::new(),
             extensions_used: Vec::new(),
+            asset_extras: Value::Null,
         }
+    }
+
+    /// Sets `asset.extras` (e.g. the plant's up direction under [`UP_KEY`]).
+    pub fn set_asset_extras(&mut self, extras: Value) {
+        self.asset_extras = extras;
     }
 
     /// Embeds an image as PNG; returns its texture index.
@@ -268,6 +278,9 @@ impl GlbBuilder {
         if !self.extensions_used.is_empty() {
             document["extensionsUsed"] = json!(self.extensions_used);
         }
+        if !self.asset_extras.is_null() {
+            document["asset"]["extras"] = self.asset_extras.clone();
+        }
         if !self.meshes.is_empty() {
             document["meshes"] = json!(self.meshes);
             document["materials"] = json!(self.materials);
@@ -313,7 +326,18 @@ impl GlbBuilder {
 /// Encodes nodes as a glb (one single-primitive mesh per node, every node a scene root);
 /// `textures` are embedded once each as PNG.
 pub fn write_glb(nodes: &[ExportNode<'_>], textures: &[&RgbaImage], generator: &str) -> Vec<u8> {
+    write_glb_with_extras(nodes, textures, generator, Value::Null)
+}
+
+/// [`write_glb`] with `asset.extras`.
+pub fn write_glb_with_extras(
+    nodes: &[ExportNode<'_>],
+    textures: &[&RgbaImage],
+    generator: &str,
+    asset_extras: Value,
+) -> Vec<u8> {
     let mut builder = GlbBuilder::new(generator);
+    builder.set_asset_extras(asset_extras);
     let texture_ids: Vec<usize> = textures.iter().map(|t| builder.add_texture(t)).collect();
     for node in nodes {
         let texture = node.texture.and_then(|t| texture_ids.get(t).copied());
@@ -579,6 +603,25 @@ fn glb_json(bytes: &[u8], path: &Path) -> Result<Value, GltfError> {
         .get(20..20 + length)
         .ok_or_else(|| invalid("truncated JSON chunk"))?;
     serde_json::from_slice(chunk).map_err(|e| invalid(&format!("JSON chunk: {e}")))
+}
+
+/// The plant's up direction recorded under `asset.extras.frond_up` (unit, world frame), if
+/// any; a glb without it is taken as z-up by the LOD and scene code.
+pub fn read_glb_up(bytes: &[u8], path: &Path) -> Result<Option<Vector3<f64>>, GltfError> {
+    let json = glb_json(bytes, path)?;
+    let Some(values) = json["asset"]["extras"][UP_KEY].as_array() else {
+        return Ok(None);
+    };
+    let components: Vec<f64> = values.iter().filter_map(Value::as_f64).collect();
+    match components.as_slice() {
+        [x, y, z] => Ok(Vector3::new(*x, *y, *z)
+            .try_normalize(1e-12)
+            .filter(|v| v.iter().all(|c| c.is_finite()))),
+        _ => Err(GltfError::Invalid {
+            path: path.display().to_string(),
+            message: format!("asset.extras.{UP_KEY} is not three numbers"),
+        }),
+    }
 }
 
 /// Reads the levels of detail of a glb (see [`GlbLod`]).

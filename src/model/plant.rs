@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use image::RgbaImage;
 use serde::Serialize;
 
-use super::gltf::{ExportNode, write_glb};
+use super::gltf::{ExportNode, UP_KEY, write_glb_with_extras};
 use crate::mesh::TriMesh;
 use crate::util::atomic::write_atomic;
 
@@ -39,6 +39,9 @@ pub struct ModelBranch {
 pub struct PlantModel {
     pub leaves: Vec<ModelLeaf>,
     pub branches: Vec<ModelBranch>,
+    /// The plant's up direction in the world frame, when known (written to the glb's
+    /// `asset.extras.frond_up`).
+    pub up: Option<[f64; 3]>,
 }
 
 /// What an export wrote.
@@ -163,10 +166,14 @@ impl PlantModel {
             });
         }
         let pages: Vec<&RgbaImage> = atlas.pages.iter().collect();
-        write_glb(
+        write_glb_with_extras(
             &nodes,
             &pages,
             &format!("frond {}", env!("CARGO_PKG_VERSION")),
+            match self.up {
+                Some(up) => serde_json::json!({ UP_KEY: up }),
+                None => serde_json::Value::Null,
+            },
         )
     }
 

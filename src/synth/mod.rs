@@ -35,5 +35,6 @@ pub fn plant_model(plant: &SynthPlant, texture_size: u32) -> PlantModel {
             })
             .collect(),
         branches: crate::branch::plant::model_branches(&plant.branches),
+        up: Some([0.0, 0.0, 1.0]),
     }
 }
