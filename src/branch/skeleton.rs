@@ -12,6 +12,7 @@
 //! branches leave one crowded place (a rosette's crown), a side branch's wandering base is
 //! replaced by its own direction extended back to the parent's axis ([`reanchor_base`]).
 
+use crate::util::union_find::UnionFind;
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap};
 use std::num::NonZero;
@@ -77,31 +78,6 @@ pub enum SkeletonError {
 /// Non-negative distances ordered by their bits (valid for finite values ≥ 0).
 fn key(distance: f64) -> u64 {
     distance.max(0.0).to_bits()
-}
-
-struct UnionFind {
-    parent: Vec<usize>,
-}
-
-impl UnionFind {
-    fn new(n: usize) -> Self {
-        Self {
-            parent: (0..n).collect(),
-        }
-    }
-    fn find(&mut self, mut i: usize) -> usize {
-        while self.parent[i] != i {
-            self.parent[i] = self.parent[self.parent[i]];
-            i = self.parent[i];
-        }
-        i
-    }
-    fn union(&mut self, a: usize, b: usize) {
-        let (a, b) = (self.find(a), self.find(b));
-        if a != b {
-            self.parent[a.max(b)] = a.min(b);
-        }
-    }
 }
 
 /// A node of the level-set tree: a connected piece of one geodesic level.

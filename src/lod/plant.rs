@@ -16,9 +16,11 @@ use super::billboard::{BillboardOptions, bake_star};
 use super::chain::{ChainOptions, build_part_chain};
 use super::select::{Viewport, switch_distance};
 use super::simplify::SimplifyError;
+use crate::graph::shape::Shape;
 use crate::mesh::TriMesh;
 use crate::model::gltf::{GlbBuilder, GltfError, PrimitiveSpec, read_glb_lod};
 use crate::render::{RenderError, Renderer};
+use crate::util::union_find::UnionFind;
 
 /// LOD building failures.
 #[derive(Debug, thiserror::Error)]
@@ -159,60 +161,27 @@ pub fn build_plant_lod(
 /// Connected components of `mesh` (triangles joined through shared vertices or vertices at
 /// the same position).
 fn components(mesh: &TriMesh) -> Vec<Vec<usize>> {
-    let mut parent: Vec<usize> = (0..mesh.positions.len()).collect();
-    fn root(parent: &mut [usize], mut v: usize) -> usize {
-        while parent[v] != v {
-            parent[v] = parent[parent[v]];
-            v = parent[v];
-        }
-        v
-    }
+    let mut sets = UnionFind::new(mesh.positions.len());
     // Vertices at the same position are one (a cap's rim and its tube's end ring).
     let mut first_at: std::collections::HashMap<[u32; 3], usize> = Default::default();
     for (v, p) in mesh.positions.iter().enumerate() {
         let first = *first_at
             .entry([p.x.to_bits(), p.y.to_bits(), p.z.to_bits()])
             .or_insert(v);
-        if first != v {
-            let (a, b) = (root(&mut parent, first), root(&mut parent, v));
-            parent[b] = a;
-        }
+        sets.union(first, v);
     }
     for tri in &mesh.triangles {
-        let a = root(&mut parent, tri[0] as usize);
-        for &w in &tri[1..] {
-            let b = root(&mut parent, w as usize);
-            if a != b {
-                parent[b] = a;
-            }
-        }
+        sets.union(tri[0] as usize, tri[1] as usize);
+        sets.union(tri[0] as usize, tri[2] as usize);
     }
     let mut by_root: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
     for (t, tri) in mesh.triangles.iter().enumerate() {
         by_root
-            .entry(root(&mut parent, tri[0] as usize))
+            .entry(sets.find(tri[0] as usize))
             .or_default()
             .push(t);
     }
     by_root.into_values().collect()
-}
-
-/// Principal spreads of points (covariance eigenvalues, largest first) and the principal axis.
-fn principal(points: &[nalgebra::Vector3<f64>]) -> ([f64; 3], nalgebra::Vector3<f64>) {
-    let n = points.len().max(1) as f64;
-    let mean = points.iter().sum::<nalgebra::Vector3<f64>>() / n;
-    let mut covariance = nalgebra::Matrix3::<f64>::zeros();
-    for p in points {
-        let d = p - mean;
-        covariance += d * d.transpose() / n;
-    }
-    let eigen = nalgebra::SymmetricEigen::new(covariance);
-    let mut order = [0usize, 1, 2];
-    order.sort_by(|&i, &j| eigen.eigenvalues[j].total_cmp(&eigen.eigenvalues[i]));
-    (
-        order.map(|i| eigen.eigenvalues[i].max(0.0)),
-        eigen.eigenvectors.column(order[0]).into_owned(),
-    )
 }
 
 /// Thickness of a mesh component (a branch): the component is cut into 8 slabs along its
@@ -224,33 +193,33 @@ fn thickness(mesh: &TriMesh, triangles: &[usize]) -> f64 {
     let mut vertices: Vec<u32> = triangles.iter().flat_map(|&t| mesh.triangles[t]).collect();
     vertices.sort_unstable();
     vertices.dedup();
-    let points: Vec<nalgebra::Vector3<f64>> = vertices
+    let points: Vec<Point3<f64>> = vertices
         .iter()
-        .map(|&v| mesh.positions[v as usize].coords.cast::<f64>())
+        .map(|&v| mesh.positions[v as usize].cast::<f64>())
         .collect();
-    let (_, axis) = principal(&points);
-    let along: Vec<f64> = points.iter().map(|p| p.dot(&axis)).collect();
+    let cross_section = |shape: &Shape| 2.0 * (shape.eigenvalues[1] + shape.eigenvalues[2]).sqrt();
+    let whole = Shape::of(points.iter().copied());
+    let along: Vec<f64> = points
+        .iter()
+        .map(|p| p.coords.dot(&whole.axes[0]))
+        .collect();
     let (lo, hi) = along
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &t| {
             (lo.min(t), hi.max(t))
         });
     let width = ((hi - lo) / SLABS as f64).max(1e-12);
-    let mut slabs: Vec<Vec<nalgebra::Vector3<f64>>> = vec![Vec::new(); SLABS];
+    let mut slabs: Vec<Vec<Point3<f64>>> = vec![Vec::new(); SLABS];
     for (p, t) in points.iter().zip(&along) {
         slabs[(((t - lo) / width) as usize).min(SLABS - 1)].push(*p);
     }
     let mut diameters: Vec<f64> = slabs
         .iter()
         .filter(|slab| slab.len() >= 4)
-        .map(|slab| {
-            let (spread, _) = principal(slab);
-            2.0 * (spread[1] + spread[2]).sqrt()
-        })
+        .map(|slab| cross_section(&Shape::of(slab.iter().copied())))
         .collect();
     if diameters.is_empty() {
-        let (spread, _) = principal(&points);
-        return 2.0 * (spread[1] + spread[2]).sqrt();
+        return cross_section(&whole);
     }
     diameters.sort_by(f64::total_cmp);
     diameters[diameters.len() / 2]

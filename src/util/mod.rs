@@ -9,3 +9,4 @@ pub mod polyline;
 pub mod progress;
 pub mod rng;
 pub mod stats;
+pub mod union_find;
