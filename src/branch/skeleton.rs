@@ -12,7 +12,6 @@
 //! branches leave one crowded place (a rosette's crown), a side branch's wandering base is
 //! replaced by its own direction extended back to the parent's axis ([`reanchor_base`]).
 
-use crate::util::union_find::UnionFind;
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap};
 use std::num::NonZero;
@@ -22,6 +21,7 @@ use nalgebra::{Point3, Vector3};
 use serde::Serialize;
 
 use super::{Branch, BranchTree, GeneralizedCylinder, Spline};
+use crate::util::union_find::UnionFind;
 
 /// Settings of the automatic skeleton.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
