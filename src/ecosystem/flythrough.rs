@@ -296,12 +296,27 @@ pub fn run_flythrough(
     }
     let ground = renderer.add_texture(&mut gpu, &ground_texture(scene.seed));
     renderer.add_mesh(&mut gpu, &scene.terrain.mesh(4.0), ground, 100_000, false)?;
-    let placements: Vec<(usize, nalgebra::Matrix4<f64>, f64)> = scene
+    // Per instance, once: its GPU transform and world bounding sphere.
+    struct Placement {
+        plant: usize,
+        transform: InstanceTransform,
+        center: Point3<f64>,
+        radius: f64,
+        scale: f64,
+    }
+    let placements: Vec<Placement> = scene
         .instances
         .iter()
         .map(|i| {
-            let similarity = i.world_from_plant(&scene.plants[i.plant]);
-            (i.plant, similarity.to_homogeneous(), i.scale)
+            let world_from_plant = i.world_from_plant(&scene.plants[i.plant]);
+            let master = &masters[i.plant];
+            Placement {
+                plant: i.plant,
+                transform: column_major(&world_from_plant.to_homogeneous()),
+                center: world_from_plant * master.center,
+                radius: master.radius * i.scale,
+                scale: i.scale,
+            }
         })
         .collect();
     let prepare_s = prepare.elapsed().as_secs_f64();
@@ -343,11 +358,9 @@ pub fn run_flythrough(
                 .map(|m| vec![Vec::new(); m.levels.len()])
                 .collect();
             let (mut culled, mut drawn, mut max_error_px, mut switches) = (0, 0, 0.0f64, 0);
-            for (k, (plant, world_from_plant, scale)) in placements.iter().enumerate() {
-                let master = &masters[*plant];
-                let center =
-                    Point3::from((world_from_plant * master.center.to_homogeneous()).xyz());
-                let radius = master.radius * scale;
+            for (k, placement) in placements.iter().enumerate() {
+                let (center, radius, scale) = (placement.center, placement.radius, placement.scale);
+                let master = &masters[placement.plant];
                 if !sphere_visible(&camera, &center, radius) {
                     culled += 1;
                     continue;
@@ -373,7 +386,7 @@ pub fn run_flythrough(
                     nearest,
                     &viewport,
                 ));
-                buckets[*plant][level].push(column_major(world_from_plant));
+                buckets[placement.plant][level].push(placement.transform);
                 drawn += 1;
             }
             let mut transforms = Vec::new();

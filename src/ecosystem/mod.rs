@@ -47,13 +47,7 @@ impl PlantParameters {
     /// Measures `asset` (z up).
     pub fn measure(asset: &PlantAsset) -> Option<Self> {
         let (lo, hi) = asset.bounds()?;
-        let axis = nalgebra::Point2::new(0.5 * (lo.x + hi.x), 0.5 * (lo.y + hi.y));
-        let reach = asset
-            .parts
-            .iter()
-            .flat_map(|p| p.mesh.positions.iter())
-            .map(|p| (nalgebra::Point2::new(p.x, p.y) - axis).norm())
-            .fold(0.0f32, f32::max);
+        let (_, reach) = asset.vertical_axis_and_reach()?;
         Some(Self {
             height_m: (hi.z - lo.z) as f64,
             crown_diameter_m: 2.0 * reach as f64,
@@ -235,12 +229,8 @@ pub fn build_scene(
         .iter()
         .map(|p| {
             let source = rng.below(sources.len());
-            let vigor = {
-                let (w, h) = density.dimensions();
-                let x = ((p.x / options.size_m[0]) * w as f64).clamp(0.0, (w - 1) as f64) as u32;
-                let y = ((p.y / options.size_m[1]) * h as f64).clamp(0.0, (h - 1) as f64) as u32;
-                density.get_pixel(x, y)[0] as f64 / 255.0
-            };
+            let vigor =
+                placement::sample(&density, p.x / options.size_m[0], p.y / options.size_m[1]);
             let (lo, hi) = options.scale_range;
             let scale = lo + (hi - lo) * vigor;
             let up = plant_up(&terrain.normal(p.x, p.y), options.orientation_weight);

@@ -12,7 +12,7 @@ use crate::util::rng::Rng;
 const CELLS_PER_PLANT: f64 = 4.0;
 
 /// Bilinear sample of a grey image at `(u, v)` ∈ [0, 1]², in [0, 1].
-fn sample(image: &GrayImage, u: f64, v: f64) -> f64 {
+pub(crate) fn sample(image: &GrayImage, u: f64, v: f64) -> f64 {
     let (w, h) = image.dimensions();
     let x = (u * w as f64 - 0.5).clamp(0.0, (w - 1) as f64);
     let y = (v * h as f64 - 0.5).clamp(0.0, (h - 1) as f64);

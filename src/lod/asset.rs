@@ -148,6 +148,20 @@ impl PlantAsset {
             .reduce(|(lo, hi), (a, b)| (lo.inf(&a), hi.sup(&b)))
     }
 
+    /// The plant's vertical axis (through the centre of its bounds, z up) and the largest
+    /// horizontal distance of a vertex from it.
+    pub fn vertical_axis_and_reach(&self) -> Option<(nalgebra::Point2<f32>, f32)> {
+        let (lo, hi) = self.bounds()?;
+        let axis = nalgebra::Point2::new(0.5 * (lo.x + hi.x), 0.5 * (lo.y + hi.y));
+        let reach = self
+            .parts
+            .iter()
+            .flat_map(|p| p.mesh.positions.iter())
+            .map(|p| (nalgebra::Point2::new(p.x, p.y) - axis).norm())
+            .fold(0.0f32, f32::max);
+        Some((axis, reach))
+    }
+
     /// Bounding sphere (centre of the bounds, farthest vertex).
     pub fn bounding_sphere(&self) -> Option<(Point3<f32>, f32)> {
         let (lo, hi) = self.bounds()?;

@@ -52,13 +52,7 @@ struct StarFrame {
 
 fn star_frame(asset: &PlantAsset) -> Option<StarFrame> {
     let (lo, hi) = asset.bounds()?;
-    let axis = Point2::new(0.5 * (lo.x + hi.x), 0.5 * (lo.y + hi.y));
-    let reach = asset
-        .parts
-        .iter()
-        .flat_map(|p| p.mesh.positions.iter())
-        .map(|p| (Point2::new(p.x, p.y) - axis).norm())
-        .fold(0.0f32, f32::max);
+    let (axis, reach) = asset.vertical_axis_and_reach()?;
     // A 2 % margin keeps silhouettes off the tile border.
     let margin = 0.02 * reach.max(hi.z - lo.z);
     (reach > 0.0 && hi.z > lo.z).then(|| StarFrame {

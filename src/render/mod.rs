@@ -269,6 +269,7 @@ struct Targets {
     height: u32,
     color_msaa: wgpu::TextureView,
     color_resolved: wgpu::Texture,
+    color_resolved_view: wgpu::TextureView,
     depth_msaa: wgpu::TextureView,
     id: wgpu::Texture,
     linear_depth: wgpu::Texture,
@@ -813,11 +814,13 @@ impl Renderer {
         let color_msaa = texture("colour msaa", COLOR_FORMAT, COLOR_SAMPLES, attachment);
         let depth_msaa = texture("depth msaa", DEPTH_FORMAT, COLOR_SAMPLES, attachment);
         let depth_single = texture("depth", DEPTH_FORMAT, 1, attachment);
+        let color_resolved = texture("colour", COLOR_FORMAT, 1, readable);
         self.targets = Some(Targets {
             width,
             height,
             color_msaa: view(&color_msaa),
-            color_resolved: texture("colour", COLOR_FORMAT, 1, readable),
+            color_resolved_view: view(&color_resolved),
+            color_resolved,
             depth_msaa: view(&depth_msaa),
             id: texture("object id", wgpu::TextureFormat::R32Uint, 1, readable),
             linear_depth: texture("linear depth", wgpu::TextureFormat::R32Float, 1, readable),
@@ -998,12 +1001,9 @@ impl Renderer {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("instanced frame"),
             });
-        let resolved_view = targets
-            .color_resolved
-            .create_view(&wgpu::TextureViewDescriptor::default());
         let mut stats = FrameStats::default();
         {
-            let mut pass = begin_color_pass(&mut encoder, targets, &resolved_view, SKY);
+            let mut pass = begin_color_pass(&mut encoder, targets, SKY);
             let (draws, triangles) = draw_meshes(
                 &mut pass,
                 &self.color_pipeline,
@@ -1057,12 +1057,8 @@ impl Renderer {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("render"),
             });
-        let resolved_view = targets
-            .color_resolved
-            .create_view(&wgpu::TextureViewDescriptor::default());
         {
-            let mut pass =
-                begin_color_pass(&mut encoder, targets, &resolved_view, wgpu::Color::BLACK);
+            let mut pass = begin_color_pass(&mut encoder, targets, wgpu::Color::BLACK);
             draw_meshes(
                 &mut pass,
                 &self.color_pipeline,
@@ -1140,11 +1136,11 @@ impl Renderer {
     }
 }
 
-/// The multisampled colour pass (resolved into `resolved_view`), cleared to `clear`.
+/// The multisampled colour pass (resolved into the readable colour target), cleared to
+/// `clear`.
 fn begin_color_pass<'a>(
     encoder: &'a mut wgpu::CommandEncoder,
     targets: &'a Targets,
-    resolved_view: &'a wgpu::TextureView,
     clear: wgpu::Color,
 ) -> wgpu::RenderPass<'a> {
     encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -1152,7 +1148,7 @@ fn begin_color_pass<'a>(
         color_attachments: &[Some(wgpu::RenderPassColorAttachment {
             view: &targets.color_msaa,
             depth_slice: None,
-            resolve_target: Some(resolved_view),
+            resolve_target: Some(&targets.color_resolved_view),
             ops: wgpu::Operations {
                 load: wgpu::LoadOp::Clear(clear),
                 store: wgpu::StoreOp::Discard,
