@@ -766,66 +766,11 @@ fn reconstruct(
             .as_bytes(),
     )
     .with_context(|| format!("writing {}", skeleton_path.display()))?;
-    let clock = std::time::Instant::now();
-    let small_segments: Vec<(u32, Vec<nalgebra::Point3<f64>>)> = leaves
-        .skipped
-        .iter()
-        .filter(|s| s.for_branch_stage)
-        .map(|s| {
-            let positions = &session.segmentation().points.positions;
-            let members = session.members(s.segment);
-            (
-                s.segment,
-                members.iter().map(|&p| positions[p as usize]).collect(),
-            )
-        })
-        .collect();
-    let attachment = frond::branch::attach::attach_leaves(
-        &branches,
-        &leaves,
-        &small_segments,
-        &session.segmentation().foreground.up,
-    );
-    let attach_seconds = clock.elapsed().as_secs_f64();
-    // Tip leaves are numbered after every segment id.
-    let tip_leaf_base = session.segments().len() as u32;
-    let mut model_branches = frond::branch::plant::model_branches(&branches);
-    let petiole_tree = frond::branch::BranchTree {
-        branches: attachment
-            .petioles
-            .iter()
-            .enumerate()
-            .map(|(k, p)| frond::branch::Branch {
-                id: branches.next_id() + k as u32,
-                parent: Some(p.branch),
-                parent_fraction: p.parent_fraction,
-                cylinder: p.cylinder.clone(),
-                leaf_at_tip: false,
-            })
-            .collect(),
-    };
-    model_branches.extend(frond::branch::plant::model_branches(&petiole_tree));
-    let model = frond::model::PlantModel {
-        leaves: leaves
-            .leaves
-            .iter()
-            .map(|l| frond::model::ModelLeaf {
-                id: l.segment,
-                mesh: l.fit.mesh.clone(),
-                texture: l.fit.texture.clone(),
-            })
-            .chain(attachment.posed.iter().map(|p| frond::model::ModelLeaf {
-                id: match p.kind {
-                    frond::branch::attach::PosedKind::SmallSegment => p.source,
-                    frond::branch::attach::PosedKind::BranchTip => tip_leaf_base + p.source,
-                },
-                mesh: p.mesh.clone(),
-                texture: p.texture.clone(),
-            }))
-            .collect(),
-        branches: model_branches,
-        up: Some(session.segmentation().foreground.up.into()),
-    };
+    let frond::branch::plant::SessionPlant {
+        model,
+        attachment,
+        attach_seconds,
+    } = frond::branch::plant::session_plant(&session, &leaves);
     let clock = std::time::Instant::now();
     let export = model
         .export(out)

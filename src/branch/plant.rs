@@ -129,3 +129,81 @@ pub fn model_branches(tree: &BranchTree) -> Vec<ModelBranch> {
         })
         .collect()
 }
+
+/// A session's plant as a model: the fitted leaves, the branches, a petiole from each leaf to
+/// its nearest branch, and posed leaves for small segments and leaf-at-tip branches (seed 004
+/// §7).
+pub struct SessionPlant {
+    pub model: crate::model::PlantModel,
+    pub attachment: super::attach::Attachment,
+    /// Seconds spent attaching the leaves.
+    pub attach_seconds: f64,
+}
+
+/// Builds the plant model of a session whose leaves have been reconstructed.
+pub fn session_plant(session: &Session, leaves: &crate::leaf::LeafReconstruction) -> SessionPlant {
+    use crate::branch::attach::{PosedKind, attach_leaves};
+    use crate::model::{ModelLeaf, PlantModel};
+    let clock = std::time::Instant::now();
+    let branches = session.branches();
+    let positions = &session.segmentation().points.positions;
+    let small_segments: Vec<(u32, Vec<Point3<f64>>)> = leaves
+        .skipped
+        .iter()
+        .filter(|s| s.for_branch_stage)
+        .map(|s| {
+            let members = session.members(s.segment);
+            (
+                s.segment,
+                members.iter().map(|&p| positions[p as usize]).collect(),
+            )
+        })
+        .collect();
+    let up = session.segmentation().foreground.up;
+    let attachment = attach_leaves(branches, leaves, &small_segments, &up);
+    let attach_seconds = clock.elapsed().as_secs_f64();
+    // Tip leaves are numbered after every segment id.
+    let tip_leaf_base = session.segments().len() as u32;
+    let mut branches_out = model_branches(branches);
+    let petiole_tree = BranchTree {
+        branches: attachment
+            .petioles
+            .iter()
+            .enumerate()
+            .map(|(k, p)| super::Branch {
+                id: branches.next_id() + k as u32,
+                parent: Some(p.branch),
+                parent_fraction: p.parent_fraction,
+                cylinder: p.cylinder.clone(),
+                leaf_at_tip: false,
+            })
+            .collect(),
+    };
+    branches_out.extend(model_branches(&petiole_tree));
+    let model = PlantModel {
+        leaves: leaves
+            .leaves
+            .iter()
+            .map(|l| ModelLeaf {
+                id: l.segment,
+                mesh: l.fit.mesh.clone(),
+                texture: l.fit.texture.clone(),
+            })
+            .chain(attachment.posed.iter().map(|p| ModelLeaf {
+                id: match p.kind {
+                    PosedKind::SmallSegment => p.source,
+                    PosedKind::BranchTip => tip_leaf_base + p.source,
+                },
+                mesh: p.mesh.clone(),
+                texture: p.texture.clone(),
+            }))
+            .collect(),
+        branches: branches_out,
+        up: Some(up.into()),
+    };
+    SessionPlant {
+        model,
+        attachment,
+        attach_seconds,
+    }
+}

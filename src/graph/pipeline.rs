@@ -71,6 +71,8 @@ pub enum SegmentError {
     NoImages { alpha: f64, folder: String },
     #[error("{path}: {message}")]
     Output { path: String, message: String },
+    #[error("segmentation cancelled")]
+    Cancelled,
 }
 
 /// Seconds per stage.
@@ -154,6 +156,9 @@ fn gradient_images(scene: &Scene, progress: &dyn Progress) -> Vec<Option<Gradien
     images
         .par_iter()
         .map(|image| {
+            if progress.is_cancelled() {
+                return None;
+            }
             let result = GradientImage::for_image(scene, image);
             progress.advance(1);
             match result {
@@ -384,10 +389,19 @@ pub fn segment_scene(
         }
     }
     timings.foreground = clock.elapsed().as_secs_f64();
+    let check_cancelled = || {
+        if progress.is_cancelled() {
+            Err(SegmentError::Cancelled)
+        } else {
+            Ok(())
+        }
+    };
+    check_cancelled()?;
 
     let clock = Instant::now();
     let gradients = if options.graph.alpha > 0.0 {
         let gradients = gradient_images(scene, progress);
+        check_cancelled()?;
         if gradients.iter().all(Option::is_none) {
             return Err(SegmentError::NoImages {
                 alpha: options.graph.alpha,
@@ -425,6 +439,7 @@ pub fn segment_scene(
         .collect();
     let graph = PointGraph::build(&plant_points, &views, options.graph);
     timings.graph = clock.elapsed().as_secs_f64();
+    check_cancelled()?;
 
     progress.stage("normalized cuts", 0);
     let clock = Instant::now();
@@ -516,6 +531,7 @@ pub fn segment_scene(
         point_segment[plant[local]] = *s;
     }
     timings.partition = clock.elapsed().as_secs_f64();
+    check_cancelled()?;
     timings.total = start.elapsed().as_secs_f64();
     Ok(Segmentation {
         points,

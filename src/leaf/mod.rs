@@ -98,6 +98,8 @@ pub enum LeafError {
     Edit(#[from] EditError),
     #[error("no leaf segment is suitable as the generic leaf (none with an image boundary)")]
     NoTemplate,
+    #[error("leaf reconstruction cancelled")]
+    Cancelled,
     #[error("the generic leaf (segment {segment}{}): {message}", view.map(|v| format!(", view {v}")).unwrap_or_default())]
     BadTemplate {
         segment: u32,
@@ -427,6 +429,9 @@ pub fn choose_boundaries(
     let failed: Vec<(usize, String)> = views
         .par_iter()
         .filter_map(|&view| {
+            if progress.is_cancelled() {
+                return None;
+            }
             let result = shared.prepare_views(&[view]);
             progress.advance(1);
             result.err().map(|e| (view, e.to_string()))
@@ -460,6 +465,9 @@ pub fn choose_boundaries(
         .par_iter()
         .map(|(segment, frame, views)| {
             let mut regions = Vec::new();
+            if progress.is_cancelled() {
+                return (*segment, regions);
+            }
             for &view in views {
                 // A view where the graph cut finds nothing simply is not a candidate.
                 let Ok(boundary) = shared.boundary_in_view(*segment, view) else {
@@ -665,6 +673,9 @@ pub fn reconstruct_leaves(
         choose_boundaries(session, &some, &plant, progress)?
     };
     timings.boundaries = clock.elapsed().as_secs_f64();
+    if progress.is_cancelled() {
+        return Err(LeafError::Cancelled);
+    }
 
     progress.stage("generic leaf", 0);
     let clock = Instant::now();
@@ -740,9 +751,12 @@ pub fn reconstruct_leaves(
     let mut results: Vec<Outcome> = groups
         .par_iter()
         .flat_map_iter(|(view, members)| {
-            let photo = view.and_then(|v| load_photo(shared, v));
+            let photo = view
+                .filter(|_| !progress.is_cancelled())
+                .and_then(|v| load_photo(shared, v));
             members
                 .iter()
+                .filter(|_| !progress.is_cancelled())
                 .map(|&(order, segment)| {
                     let points = segment_points(shared, segment);
                     let boundary_view = view.and_then(|v| {
@@ -773,6 +787,9 @@ pub fn reconstruct_leaves(
                 .collect::<Vec<_>>()
         })
         .collect();
+    if progress.is_cancelled() {
+        return Err(LeafError::Cancelled);
+    }
     results.sort_by_key(|r| r.order);
     let mut leaves = Vec::new();
     let mut skipped = Vec::new();

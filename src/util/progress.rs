@@ -7,6 +7,11 @@ pub trait Progress: Sync {
     fn stage(&self, name: &str, total: u64);
     /// `units` more units of the current stage are done.
     fn advance(&self, units: u64);
+    /// Whether the user asked to stop: long work checks it between (and inside) stages and
+    /// returns its `Cancelled` error, leaving its inputs as they were.
+    fn is_cancelled(&self) -> bool {
+        false
+    }
 }
 
 /// Discards progress.

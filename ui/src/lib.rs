@@ -1,222 +1,103 @@
 //! frond-ui: Frond's interactive GUI (egui/eframe on wgpu).
 //!
-//! The GUI owns no algorithm: it calls the `frond` library. This first version opens a COLMAP
-//! folder (off the UI thread) and lists its cameras and images with their file status.
+//! The GUI owns no algorithm: every edit is a library `Command` applied to the editing
+//! `Session` (so it is undoable and saved in the project's history), and long work (opening and
+//! segmenting, fitting leaves, the automatic skeleton, export) runs on a worker thread with a
+//! progress bar and a Cancel button.
 
+pub mod files;
+pub mod image_view;
+pub mod jobs;
+pub mod tools;
+pub mod workspace;
+
+use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
-use std::sync::mpsc::{Receiver, channel};
+use std::time::{Duration, Instant};
 
+use egui::{Color32, Key, KeyboardShortcut, Modifiers, RichText};
 use egui_extras::{Column, TableBuilder};
-use frond::scene::{ImageFileStatus, Scene};
+use frond::edit::Command;
+use frond::graph::pipeline::SegmentLabel;
+use frond::scene::ImageFileStatus;
 
-/// A scene ready to show: the model and each image's file status (computed once on load).
-pub struct LoadedScene {
-    pub scene: Scene,
-    pub image_status: Vec<ImageFileStatus>,
-}
+use files::{ConfigDir, DirEntry, list_dir, recoverable_autosave};
+use image_view::{Action, ImagePanel};
+use jobs::{Job, JobProgress, Poll};
+use tools::{TOOL_GROUPS, Tool};
+use workspace::Workspace;
 
-impl LoadedScene {
-    fn load(path: &Path) -> Result<Self, String> {
-        let scene = Scene::open(path).map_err(|e| e.to_string())?;
-        let image_status = scene
-            .reconstruction
-            .images()
-            .iter()
-            .map(|image| scene.image_file_status(image))
-            .collect();
-        Ok(Self {
-            scene,
-            image_status,
-        })
-    }
-}
+/// How often unsaved edits are autosaved.
+pub const AUTOSAVE_INTERVAL: Duration = Duration::from_secs(30);
 
-enum LoadState {
-    Empty,
-    Loading {
+/// What a finished job hands back.
+enum Outcome {
+    Opened {
         path: PathBuf,
-        result: Receiver<Result<LoadedScene, String>>,
+        result: Result<Box<Workspace>, String>,
     },
-    Loaded(Box<LoadedScene>),
-    Failed(String),
+    /// Work on the open workspace, which travelled to the worker and comes back.
+    Worked {
+        workspace: Box<Workspace>,
+        result: Result<String, String>,
+    },
+}
+
+/// A message in the status bar.
+#[derive(Clone, Debug)]
+pub struct Status {
+    pub text: String,
+    pub is_error: bool,
+}
+
+/// The side panel's tabs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SideTab {
+    Segments,
+    Branches,
+    History,
+    Scene,
+}
+
+enum Dialog {
+    Open {
+        folder: PathBuf,
+        path: String,
+        entries: Result<Vec<DirEntry>, String>,
+    },
+    SaveAs {
+        path: String,
+    },
+    Export {
+        path: String,
+    },
 }
 
 /// The application state.
 pub struct FrondApp {
-    path_input: String,
-    state: LoadState,
-    selected_image: Option<usize>,
+    config: Option<ConfigDir>,
+    recent: Vec<PathBuf>,
+    workspace: Option<Box<Workspace>>,
+    job: Option<Job<Outcome>>,
+    /// The error of the last failed open, shown when nothing is open.
+    open_error: Option<String>,
+    pub panel: ImagePanel,
+    pub tool: Tool,
+    pub side_tab: SideTab,
+    status: Option<Status>,
+    dialog: Option<Dialog>,
+    /// An autosave holding edits the opened work lacks.
+    recovery: Option<PathBuf>,
+    pub show_help: bool,
+    pub show_frame_time: bool,
+    pub autosave_interval: Duration,
+    last_autosave: Instant,
+    /// Recent UI build times (ms).
+    frame_times: VecDeque<f32>,
+    title: String,
 }
 
-impl FrondApp {
-    /// A new window; starts loading `initial` when given.
-    pub fn new(initial: Option<PathBuf>) -> Self {
-        let mut app = Self {
-            path_input: initial
-                .as_ref()
-                .map(|p| p.display().to_string())
-                .unwrap_or_default(),
-            state: LoadState::Empty,
-            selected_image: None,
-        };
-        if let Some(path) = initial {
-            app.open(path);
-        }
-        app
-    }
-
-    /// Starts loading a COLMAP folder on a worker thread.
-    pub fn open(&mut self, path: PathBuf) {
-        let (sender, receiver) = channel();
-        let worker_path = path.clone();
-        std::thread::spawn(move || {
-            let _ = sender.send(LoadedScene::load(&worker_path));
-        });
-        self.selected_image = None;
-        self.state = LoadState::Loading {
-            path,
-            result: receiver,
-        };
-    }
-
-    /// The loaded scene, if any.
-    pub fn loaded(&self) -> Option<&LoadedScene> {
-        match &self.state {
-            LoadState::Loaded(loaded) => Some(loaded),
-            _ => None,
-        }
-    }
-
-    /// The load error, if the last load failed.
-    pub fn error(&self) -> Option<&str> {
-        match &self.state {
-            LoadState::Failed(message) => Some(message),
-            _ => None,
-        }
-    }
-
-    /// Whether a load is in progress.
-    pub fn is_loading(&self) -> bool {
-        matches!(self.state, LoadState::Loading { .. })
-    }
-
-    fn poll(&mut self, ctx: &egui::Context) {
-        if let LoadState::Loading { result, .. } = &self.state {
-            match result.try_recv() {
-                Ok(Ok(loaded)) => self.state = LoadState::Loaded(Box::new(loaded)),
-                Ok(Err(message)) => self.state = LoadState::Failed(message),
-                Err(std::sync::mpsc::TryRecvError::Empty) => ctx.request_repaint(),
-                Err(std::sync::mpsc::TryRecvError::Disconnected) => {
-                    self.state = LoadState::Failed("loading thread stopped unexpectedly".into())
-                }
-            }
-        }
-    }
-
-    /// Draws the whole window.
-    pub fn window_ui(&mut self, ui: &mut egui::Ui) {
-        self.poll(ui.ctx());
-        egui::Panel::top("toolbar").show(ui, |ui| self.toolbar_ui(ui));
-        egui::Panel::bottom("status").show(ui, |ui| self.status_ui(ui));
-        if let LoadState::Loaded(loaded) = &self.state {
-            egui::Panel::left("cameras")
-                .default_size(320.0)
-                .show(ui, |ui| cameras_ui(ui, loaded));
-        }
-        egui::CentralPanel::default().show(ui, |ui| self.central_ui(ui));
-    }
-
-    fn toolbar_ui(&mut self, ui: &mut egui::Ui) {
-        ui.horizontal(|ui| {
-            ui.strong("Frond");
-            ui.separator();
-            ui.label("COLMAP folder:");
-            let edit = ui.add(
-                egui::TextEdit::singleline(&mut self.path_input)
-                    .hint_text("project, dense/0 or model folder")
-                    .desired_width(ui.available_width() - 80.0),
-            );
-            let enter = edit.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
-            if (ui.button("Open").clicked() || enter) && !self.path_input.trim().is_empty() {
-                self.open(PathBuf::from(self.path_input.trim()));
-            }
-        });
-    }
-
-    fn status_ui(&self, ui: &mut egui::Ui) {
-        ui.horizontal(|ui| match &self.state {
-            LoadState::Empty => {
-                ui.label("Open a COLMAP project (images/ + sparse/0), a dense/0 workspace or a model folder.");
-            }
-            LoadState::Loading { path, .. } => {
-                ui.spinner();
-                ui.label(format!("Loading {} …", path.display()));
-            }
-            LoadState::Loaded(loaded) => {
-                let model = &loaded.scene.reconstruction;
-                ui.label(format!(
-                    "{} cameras · {} images · {} points · {} observations · {} format",
-                    model.cameras().len(),
-                    model.images().len(),
-                    model.points().len(),
-                    model.num_observations(),
-                    loaded.scene.format
-                ));
-            }
-            LoadState::Failed(_) => {
-                ui.colored_label(ui.visuals().error_fg_color, "Loading failed");
-            }
-        });
-    }
-
-    fn central_ui(&mut self, ui: &mut egui::Ui) {
-        match &self.state {
-            LoadState::Loaded(loaded) => {
-                images_ui(ui, loaded, &mut self.selected_image);
-            }
-            LoadState::Failed(message) => {
-                ui.heading("Could not open the scene");
-                ui.label(message.as_str());
-            }
-            LoadState::Loading { .. } => {
-                ui.centered_and_justified(|ui| ui.spinner());
-            }
-            LoadState::Empty => {
-                ui.centered_and_justified(|ui| ui.label("No scene open"));
-            }
-        }
-    }
-}
-
-fn cameras_ui(ui: &mut egui::Ui, loaded: &LoadedScene) {
-    let model = &loaded.scene.reconstruction;
-    ui.heading(format!("Cameras ({})", model.cameras().len()));
-    ui.separator();
-    egui::ScrollArea::vertical().show(ui, |ui| {
-        for camera in model.cameras() {
-            egui::CollapsingHeader::new(format!(
-                "Camera {} · {} · {}×{}",
-                camera.id, camera.model, camera.width, camera.height
-            ))
-            .id_salt(("camera", camera.id))
-            .show(ui, |ui| {
-                egui::Grid::new(("camera_params", camera.id))
-                    .striped(true)
-                    .show(ui, |ui| {
-                        for (name, value) in
-                            camera.model.param_names().split(", ").zip(camera.params())
-                        {
-                            ui.label(name);
-                            ui.monospace(format!("{value:.6}"));
-                            ui.end_row();
-                        }
-                    });
-            });
-        }
-    });
-}
-
-fn status_text(status: &ImageFileStatus) -> String {
+fn file_status_text(status: &ImageFileStatus) -> String {
     match status {
         ImageFileStatus::Present => "present".into(),
         ImageFileStatus::NoImagesFolder => "no images folder".into(),
@@ -229,39 +110,1228 @@ fn status_text(status: &ImageFileStatus) -> String {
     }
 }
 
-fn images_ui(ui: &mut egui::Ui, loaded: &LoadedScene, selected: &mut Option<usize>) {
-    let model = &loaded.scene.reconstruction;
-    let present = loaded
-        .image_status
-        .iter()
-        .filter(|s| **s == ImageFileStatus::Present)
-        .count();
-    ui.heading(format!(
-        "Images ({} registered, {present} files present)",
-        model.images().len()
+fn open_dialog(folder: PathBuf) -> Dialog {
+    let entries = list_dir(&folder).map_err(|e| format!("{}: {e}", folder.display()));
+    Dialog::Open {
+        path: folder.display().to_string(),
+        folder,
+        entries,
+    }
+}
+
+impl FrondApp {
+    /// A new window with the user's configuration folder; starts opening `initial` when given.
+    pub fn new(initial: Option<PathBuf>) -> Self {
+        Self::with_config(initial, ConfigDir::from_env())
+    }
+
+    /// A new window keeping recent files and autosaves in `config`.
+    pub fn with_config(initial: Option<PathBuf>, config: Option<ConfigDir>) -> Self {
+        let recent = config.as_ref().map(ConfigDir::recent).unwrap_or_default();
+        let mut app = Self {
+            config,
+            recent,
+            workspace: None,
+            job: None,
+            open_error: None,
+            panel: ImagePanel::default(),
+            tool: Tool::Confirm,
+            side_tab: SideTab::Segments,
+            status: None,
+            dialog: None,
+            recovery: None,
+            show_help: false,
+            show_frame_time: true,
+            autosave_interval: AUTOSAVE_INTERVAL,
+            last_autosave: Instant::now(),
+            frame_times: VecDeque::new(),
+            title: String::new(),
+        };
+        if let Some(path) = initial {
+            app.open(path);
+        }
+        app
+    }
+
+    /// The open work.
+    pub fn workspace(&self) -> Option<&Workspace> {
+        self.workspace.as_deref()
+    }
+
+    /// Whether long work is running.
+    pub fn is_busy(&self) -> bool {
+        self.job.is_some()
+    }
+
+    /// The last open error, if nothing could be opened.
+    pub fn error(&self) -> Option<&str> {
+        self.open_error.as_deref()
+    }
+
+    /// The status bar's message.
+    pub fn status(&self) -> Option<&Status> {
+        self.status.as_ref()
+    }
+
+    /// The autosave offered for recovery.
+    pub fn recovery(&self) -> Option<&Path> {
+        self.recovery.as_deref()
+    }
+
+    /// Recent files, most recent first.
+    pub fn recent(&self) -> &[PathBuf] {
+        &self.recent
+    }
+
+    /// Asks the running job to stop.
+    pub fn cancel_job(&self) {
+        if let Some(job) = &self.job {
+            job.progress.cancel();
+        }
+    }
+
+    fn info(&mut self, text: impl Into<String>) {
+        self.status = Some(Status {
+            text: text.into(),
+            is_error: false,
+        });
+    }
+
+    fn fail(&mut self, text: impl Into<String>) {
+        let text = text.into();
+        tracing::warn!("{text}");
+        self.status = Some(Status {
+            text,
+            is_error: true,
+        });
+    }
+
+    /// Starts opening a COLMAP folder or a project file on a worker thread.
+    pub fn open(&mut self, path: PathBuf) {
+        if self.job.is_some() {
+            self.fail("wait for the running work to finish (or cancel it) first");
+            return;
+        }
+        let worker_path = path.clone();
+        self.job = Some(Job::spawn(
+            format!("Opening {}", path.display()),
+            move |progress: &JobProgress| Outcome::Opened {
+                result: Workspace::open(&worker_path, progress)
+                    .map(Box::new)
+                    .map_err(|e| e.to_string()),
+                path: worker_path,
+            },
+        ));
+    }
+
+    /// Runs `work` on the open workspace on a worker thread.
+    fn run_on_workspace(
+        &mut self,
+        title: &str,
+        work: impl FnOnce(&mut Workspace, &JobProgress) -> Result<String, String> + Send + 'static,
+    ) {
+        if self.job.is_some() {
+            self.fail("wait for the running work to finish (or cancel it) first");
+            return;
+        }
+        let Some(mut workspace) = self.workspace.take() else {
+            self.fail("open a COLMAP folder or a project first");
+            return;
+        };
+        self.panel.cancel_gesture();
+        self.job = Some(Job::spawn(title, move |progress: &JobProgress| {
+            let result = work(&mut workspace, progress);
+            Outcome::Worked { workspace, result }
+        }));
+    }
+
+    /// Fits every leaf segment (seed 004 §6) on a worker thread.
+    pub fn fit_leaves(&mut self) {
+        self.run_on_workspace("Fitting leaves", |workspace, progress| {
+            workspace.fit_leaves(progress).map_err(|e| e.to_string())?;
+            let leaves = workspace
+                .current_leaves()
+                .map_or((0, 0), |l| (l.leaves.len(), l.skipped.len()));
+            Ok(format!("{} leaves fitted, {} skipped", leaves.0, leaves.1))
+        });
+    }
+
+    /// Replaces the branches by the automatic skeleton (an undoable command) on a worker.
+    pub fn automatic_skeleton(&mut self) {
+        self.run_on_workspace("Automatic skeleton", |workspace, _| {
+            workspace
+                .apply(Command::AutomaticSkeleton)
+                .map_err(|e| e.to_string())?;
+            Ok(format!(
+                "automatic skeleton: {} branches",
+                workspace.session.branches().branches.len()
+            ))
+        });
+    }
+
+    /// Exports glb, OBJ and PLY into `folder` on a worker thread.
+    pub fn export(&mut self, folder: PathBuf) {
+        self.run_on_workspace("Exporting", move |workspace, progress| {
+            let summary = workspace.export(&folder, progress)?;
+            Ok(format!(
+                "exported {} leaves, {} branches, {} triangles to {}",
+                summary.leaves,
+                summary.branches,
+                summary.triangles,
+                summary.folder.display()
+            ))
+        });
+    }
+
+    /// Replaces the session by the offered autosave.
+    pub fn recover(&mut self) {
+        let Some(autosave) = self.recovery.take() else {
+            return;
+        };
+        self.run_on_workspace("Recovering autosaved edits", move |workspace, progress| {
+            workspace
+                .recover(&autosave, progress)
+                .map_err(|e| e.to_string())?;
+            let (_, position) = workspace.session.history();
+            Ok(format!("recovered {position} edits from the autosave"))
+        });
+    }
+
+    /// Deletes the offered autosave.
+    pub fn discard_recovery(&mut self) {
+        if let Some(autosave) = self.recovery.take()
+            && let Err(e) = std::fs::remove_file(&autosave)
+        {
+            self.fail(format!("could not delete {}: {e}", autosave.display()));
+        }
+    }
+
+    /// Saves the project at `path` (atomically) and drops the autosave it supersedes.
+    pub fn save_as(&mut self, path: PathBuf) {
+        let Some(workspace) = self.workspace.as_mut() else {
+            return;
+        };
+        match workspace.save(&path) {
+            Ok(()) => {
+                if let Some(config) = &self.config {
+                    let _ = std::fs::remove_file(config.autosave_path(&workspace.input));
+                    if let Ok(recent) = config.push_recent(&path) {
+                        self.recent = recent;
+                    }
+                }
+                self.info(format!("saved {}", path.display()));
+            }
+            Err(e) => self.fail(format!("could not save: {e}")),
+        }
+    }
+
+    /// Saves to the project file, or asks where when there is none yet.
+    pub fn save(&mut self) {
+        match self.workspace.as_ref().map(|w| w.project_path.clone()) {
+            Some(Some(path)) => self.save_as(path),
+            Some(None) => self.dialog = Some(self.save_as_dialog()),
+            None => {}
+        }
+    }
+
+    fn save_as_dialog(&self) -> Dialog {
+        let path = self.workspace.as_ref().map_or_else(String::new, |w| {
+            w.project_path
+                .clone()
+                .unwrap_or_else(|| {
+                    let folder = w.input.parent().unwrap_or(Path::new("."));
+                    folder.join(format!("{}.frond", w.name()))
+                })
+                .display()
+                .to_string()
+        });
+        Dialog::SaveAs { path }
+    }
+
+    /// Applies an edit, reporting a refusal in the status bar.
+    pub fn apply(&mut self, command: Command) {
+        let Some(workspace) = self.workspace.as_mut() else {
+            return;
+        };
+        let description = command.describe();
+        match workspace.apply(command) {
+            Ok(()) => self.info(description),
+            Err(e) => self.fail(format!("{description}: {e}")),
+        }
+    }
+
+    pub fn undo(&mut self) {
+        if let Some(workspace) = self.workspace.as_mut() {
+            self.panel.cancel_gesture();
+            if workspace.undo() {
+                self.info("undone");
+            }
+        }
+    }
+
+    pub fn redo(&mut self) {
+        if let Some(workspace) = self.workspace.as_mut()
+            && workspace.redo()
+        {
+            self.info("redone");
+        }
+    }
+
+    fn poll_job(&mut self, ctx: &egui::Context) {
+        let Some(job) = &self.job else {
+            return;
+        };
+        let outcome = match job.poll() {
+            Poll::Running => {
+                ctx.request_repaint_after(Duration::from_millis(50));
+                return;
+            }
+            Poll::Lost => {
+                self.job = None;
+                self.fail("the worker stopped unexpectedly");
+                return;
+            }
+            Poll::Done(outcome) => outcome,
+        };
+        let seconds = job.started.elapsed().as_secs_f64();
+        self.job = None;
+        match outcome {
+            Outcome::Opened { path, result } => match result {
+                Ok(workspace) => {
+                    self.recovery = self.config.as_ref().and_then(|config| {
+                        recoverable_autosave(
+                            config,
+                            &workspace.input,
+                            workspace.project_path.as_deref(),
+                        )
+                    });
+                    if let Some(config) = &self.config
+                        && let Ok(recent) = config.push_recent(&path)
+                    {
+                        self.recent = recent;
+                    }
+                    let (leaves, _, _) = workspace.segment_counts();
+                    self.panel.reset();
+                    self.workspace = Some(workspace);
+                    self.open_error = None;
+                    self.last_autosave = Instant::now();
+                    self.info(format!(
+                        "opened {} in {seconds:.1} s: {leaves} leaf segments",
+                        path.display()
+                    ));
+                }
+                Err(message) => {
+                    self.fail(format!("could not open {}: {message}", path.display()));
+                    if self.workspace.is_none() {
+                        self.open_error = Some(message);
+                    }
+                }
+            },
+            Outcome::Worked { workspace, result } => {
+                self.workspace = Some(workspace);
+                match result {
+                    Ok(message) => self.info(format!("{message} ({seconds:.1} s)")),
+                    Err(message) => self.fail(message),
+                }
+            }
+        }
+    }
+
+    fn autosave_tick(&mut self) {
+        if self.last_autosave.elapsed() < self.autosave_interval {
+            return;
+        }
+        self.last_autosave = Instant::now();
+        let (Some(workspace), Some(config)) = (self.workspace.as_mut(), &self.config) else {
+            return;
+        };
+        let path = config.autosave_path(&workspace.input);
+        match workspace.autosave(&path) {
+            Ok(true) => tracing::info!("autosaved to {}", path.display()),
+            Ok(false) => {}
+            Err(e) => self.fail(format!("autosave failed: {e}")),
+        }
+    }
+
+    fn shortcuts(&mut self, ctx: &egui::Context) {
+        let command = Modifiers::COMMAND;
+        let shift_command = Modifiers::COMMAND | Modifiers::SHIFT;
+        let shortcut = |modifiers, key| KeyboardShortcut::new(modifiers, key);
+        let pressed = |s: KeyboardShortcut| ctx.input_mut(|i| i.consume_shortcut(&s));
+        // Longer combinations first: Ctrl+Z also matches Ctrl+Shift+Z logically.
+        if pressed(shortcut(shift_command, Key::Z)) || pressed(shortcut(command, Key::Y)) {
+            self.redo();
+        } else if pressed(shortcut(command, Key::Z)) {
+            self.undo();
+        }
+        if pressed(shortcut(shift_command, Key::S)) {
+            self.dialog = Some(self.save_as_dialog());
+        } else if pressed(shortcut(command, Key::S)) {
+            self.save();
+        }
+        if pressed(shortcut(command, Key::O)) {
+            self.show_open_dialog();
+        }
+        if pressed(shortcut(command, Key::E)) && self.workspace.is_some() {
+            self.show_export_dialog();
+        }
+        if pressed(shortcut(Modifiers::NONE, Key::F1)) {
+            self.show_help = !self.show_help;
+        }
+        if pressed(shortcut(Modifiers::NONE, Key::F12)) {
+            self.show_frame_time = !self.show_frame_time;
+        }
+        if ctx.egui_wants_keyboard_input() || self.dialog.is_some() {
+            return;
+        }
+        let plain = |key| ctx.input_mut(|i| i.consume_key(Modifiers::NONE, key));
+        if plain(Key::Escape) {
+            self.panel.cancel_gesture();
+        }
+        if plain(Key::F) {
+            self.panel.fit();
+        }
+        if let Some(workspace) = &self.workspace {
+            let views = workspace.session.scene().reconstruction.images().len();
+            if plain(Key::ArrowRight) && views > 0 {
+                self.panel.select_view((self.panel.view + 1) % views);
+            }
+            if plain(Key::ArrowLeft) && views > 0 {
+                self.panel
+                    .select_view((self.panel.view + views - 1) % views);
+            }
+        }
+        for tool in Tool::all() {
+            if plain(tool.shortcut()) {
+                self.select_tool(tool);
+            }
+        }
+    }
+
+    /// Makes `tool` the active tool.
+    pub fn select_tool(&mut self, tool: Tool) {
+        if tool != self.tool {
+            self.panel.cancel_gesture();
+            self.tool = tool;
+        }
+    }
+
+    fn show_open_dialog(&mut self) {
+        let folder = self
+            .workspace
+            .as_ref()
+            .and_then(|w| w.input.parent().map(Path::to_path_buf))
+            .or_else(|| std::env::current_dir().ok())
+            .unwrap_or_else(|| PathBuf::from("/"));
+        self.dialog = Some(open_dialog(folder));
+    }
+
+    fn show_export_dialog(&mut self) {
+        let path = self.workspace.as_ref().map_or_else(String::new, |w| {
+            let base = w.project_path.as_deref().unwrap_or(&w.input);
+            let folder = base.parent().unwrap_or(Path::new("."));
+            folder
+                .join(format!("{}_export", w.name().trim_end_matches(".frond")))
+                .display()
+                .to_string()
+        });
+        self.dialog = Some(Dialog::Export { path });
+    }
+
+    /// Draws the whole window.
+    pub fn window_ui(&mut self, ui: &mut egui::Ui) {
+        let started = Instant::now();
+        let ctx = ui.ctx().clone();
+        self.poll_job(&ctx);
+        self.shortcuts(&ctx);
+        self.autosave_tick();
+        self.update_title(&ctx);
+
+        egui::Panel::top("menu").show(ui, |ui| self.menu_ui(ui));
+        egui::Panel::bottom("status").show(ui, |ui| self.status_ui(ui));
+        if self.workspace.is_some() {
+            egui::Panel::left("tools")
+                .resizable(false)
+                .exact_size(132.0)
+                .show(ui, |ui| self.tools_ui(ui));
+            egui::Panel::right("side")
+                .default_size(320.0)
+                .show(ui, |ui| self.side_ui(ui));
+            egui::Panel::bottom("filmstrip")
+                .resizable(false)
+                .show(ui, |ui| {
+                    if let Some(workspace) = self.workspace.as_deref() {
+                        self.panel.filmstrip_ui(ui, workspace);
+                    }
+                });
+        }
+        egui::CentralPanel::default().show(ui, |ui| self.central_ui(ui));
+        self.dialog_ui(&ctx);
+        if self.show_help {
+            self.help_ui(&ctx);
+        }
+        let ms = started.elapsed().as_secs_f32() * 1000.0;
+        self.frame_times.push_back(ms);
+        if self.frame_times.len() > 60 {
+            self.frame_times.pop_front();
+        }
+    }
+
+    /// Mean UI build time over the last frames (ms).
+    pub fn mean_frame_ms(&self) -> f32 {
+        if self.frame_times.is_empty() {
+            return 0.0;
+        }
+        self.frame_times.iter().sum::<f32>() / self.frame_times.len() as f32
+    }
+
+    fn update_title(&mut self, ctx: &egui::Context) {
+        let title = match &self.workspace {
+            Some(w) => format!(
+                "{}{} — Frond",
+                if w.is_dirty() { "● " } else { "" },
+                w.name()
+            ),
+            None => "Frond".to_owned(),
+        };
+        if title != self.title {
+            ctx.send_viewport_cmd(egui::ViewportCommand::Title(title.clone()));
+            self.title = title;
+        }
+    }
+
+    fn menu_ui(&mut self, ui: &mut egui::Ui) {
+        egui::MenuBar::new().ui(ui, |ui| {
+            ui.menu_button("File", |ui| {
+                if ui
+                    .add(egui::Button::new("Open…").shortcut_text("Ctrl+O"))
+                    .clicked()
+                {
+                    self.show_open_dialog();
+                }
+                ui.menu_button("Open recent", |ui| {
+                    if self.recent.is_empty() {
+                        ui.label("No recent files");
+                    }
+                    for path in self.recent.clone() {
+                        if ui.button(path.display().to_string()).clicked() {
+                            self.open(path);
+                        }
+                    }
+                });
+                ui.separator();
+                let open = self.workspace.is_some();
+                if ui
+                    .add_enabled(open, egui::Button::new("Save").shortcut_text("Ctrl+S"))
+                    .clicked()
+                {
+                    self.save();
+                }
+                if ui
+                    .add_enabled(
+                        open,
+                        egui::Button::new("Save as…").shortcut_text("Ctrl+Shift+S"),
+                    )
+                    .clicked()
+                {
+                    self.dialog = Some(self.save_as_dialog());
+                }
+                if ui
+                    .add_enabled(
+                        open,
+                        egui::Button::new("Export glb / OBJ / PLY…").shortcut_text("Ctrl+E"),
+                    )
+                    .clicked()
+                {
+                    self.show_export_dialog();
+                }
+                ui.separator();
+                if ui.button("Quit").clicked() {
+                    ui.ctx().send_viewport_cmd(egui::ViewportCommand::Close);
+                }
+            });
+            ui.menu_button("Edit", |ui| {
+                let (can_undo, can_redo) = self.workspace.as_ref().map_or((false, false), |w| {
+                    (w.session.can_undo(), w.session.can_redo())
+                });
+                if ui
+                    .add_enabled(can_undo, egui::Button::new("Undo").shortcut_text("Ctrl+Z"))
+                    .clicked()
+                {
+                    self.undo();
+                }
+                if ui
+                    .add_enabled(
+                        can_redo,
+                        egui::Button::new("Redo").shortcut_text("Ctrl+Shift+Z"),
+                    )
+                    .clicked()
+                {
+                    self.redo();
+                }
+                ui.separator();
+                let ready = self.workspace.is_some() && self.job.is_none();
+                if ui
+                    .add_enabled(ready, egui::Button::new("Fit leaves"))
+                    .clicked()
+                {
+                    self.fit_leaves();
+                }
+                if ui
+                    .add_enabled(ready, egui::Button::new("Automatic skeleton"))
+                    .clicked()
+                {
+                    self.automatic_skeleton();
+                }
+            });
+            ui.menu_button("View", |ui| {
+                for (name, on) in self.panel.overlays.toggles() {
+                    ui.checkbox(on, name);
+                }
+                ui.separator();
+                if ui
+                    .add(egui::Button::new("Fit photo").shortcut_text("F"))
+                    .clicked()
+                {
+                    self.panel.fit();
+                }
+                ui.checkbox(&mut self.show_frame_time, "Frame time (F12)");
+            });
+            ui.menu_button("Tools", |ui| {
+                for tool in Tool::all() {
+                    let text = format!("{}  {}", tool.icon(), tool.label());
+                    if ui
+                        .add(
+                            egui::Button::selectable(self.tool == tool, text)
+                                .shortcut_text(tool.shortcut().name()),
+                        )
+                        .clicked()
+                    {
+                        self.select_tool(tool);
+                    }
+                }
+            });
+            ui.menu_button("Help", |ui| {
+                if ui
+                    .add(egui::Button::new("Shortcuts").shortcut_text("F1"))
+                    .clicked()
+                {
+                    self.show_help = true;
+                }
+            });
+            ui.separator();
+            let (can_undo, can_redo) = self.workspace.as_ref().map_or((false, false), |w| {
+                (w.session.can_undo(), w.session.can_redo())
+            });
+            if ui
+                .add_enabled(can_undo, egui::Button::new("⟲ Undo"))
+                .on_hover_text("Undo (Ctrl+Z)")
+                .clicked()
+            {
+                self.undo();
+            }
+            if ui
+                .add_enabled(can_redo, egui::Button::new("⟳ Redo"))
+                .on_hover_text("Redo (Ctrl+Shift+Z)")
+                .clicked()
+            {
+                self.redo();
+            }
+        });
+    }
+
+    fn tools_ui(&mut self, ui: &mut egui::Ui) {
+        ui.add_space(4.0);
+        for (group, tools) in TOOL_GROUPS {
+            ui.label(RichText::new(group).small().strong());
+            for &tool in tools {
+                let text = format!("{}  {}", tool.icon(), tool.label());
+                let button = egui::Button::selectable(self.tool == tool, text)
+                    .min_size(egui::vec2(ui.available_width(), 24.0));
+                if ui
+                    .add(button)
+                    .on_hover_text(format!("{} ({})", tool.hint(), tool.shortcut().name()))
+                    .clicked()
+                {
+                    self.select_tool(tool);
+                }
+            }
+            ui.add_space(6.0);
+        }
+    }
+
+    fn side_ui(&mut self, ui: &mut egui::Ui) {
+        ui.horizontal(|ui| {
+            for (tab, name) in [
+                (SideTab::Segments, "Segments"),
+                (SideTab::Branches, "Branches"),
+                (SideTab::History, "History"),
+                (SideTab::Scene, "Scene"),
+            ] {
+                ui.selectable_value(&mut self.side_tab, tab, name);
+            }
+        });
+        ui.separator();
+        match self.side_tab {
+            SideTab::Segments => self.segments_ui(ui),
+            SideTab::Branches => self.branches_ui(ui),
+            SideTab::History => self.history_ui(ui),
+            SideTab::Scene => {
+                if let Some(workspace) = self.workspace.as_deref() {
+                    scene_ui(ui, workspace, &mut self.panel);
+                }
+            }
+        }
+    }
+
+    fn segments_ui(&mut self, ui: &mut egui::Ui) {
+        let Some(workspace) = self.workspace.as_deref_mut() else {
+            return;
+        };
+        let (leaves, confirmed, other) = workspace.segment_counts();
+        let points = workspace.session.segmentation().points.len();
+        egui::Grid::new("segment_counts")
+            .num_columns(2)
+            .show(ui, |ui| {
+                ui.label("Points");
+                ui.label(points.to_string());
+                ui.end_row();
+                ui.label("Leaf segments");
+                ui.label(format!("{leaves} ({confirmed} confirmed)"));
+                ui.end_row();
+                ui.label("Non-leaf segments");
+                ui.label(other.to_string());
+                ui.end_row();
+            });
+        ui.separator();
+        ui.horizontal(|ui| {
+            ui.label("Mark non-leaf as");
+            egui::ComboBox::from_id_salt("non_leaf_label")
+                .selected_text(format!("{:?}", self.panel.non_leaf_label))
+                .show_ui(ui, |ui| {
+                    for label in [SegmentLabel::Stem, SegmentLabel::Pot, SegmentLabel::Other] {
+                        ui.selectable_value(
+                            &mut self.panel.non_leaf_label,
+                            label,
+                            format!("{label:?}"),
+                        );
+                    }
+                });
+        });
+        ui.separator();
+        ui.strong("Generic leaf");
+        match workspace.generic_leaf {
+            Some(pick) => {
+                ui.horizontal(|ui| {
+                    let view = pick.view.map_or_else(
+                        || "best view".to_owned(),
+                        |v| {
+                            workspace.session.scene().reconstruction.images()[v]
+                                .name
+                                .clone()
+                        },
+                    );
+                    ui.label(format!("segment {} in {view}", pick.segment));
+                    if ui.small_button("Automatic").clicked() {
+                        workspace.generic_leaf = None;
+                    }
+                });
+            }
+            None => {
+                ui.label("automatic (the most frontal, whole, large leaf)");
+            }
+        }
+        ui.separator();
+        let up_to_date = workspace.current_leaves().is_some();
+        let fit_summary = workspace.leaves.as_ref().map(|(_, l)| {
+            (
+                l.leaves.len(),
+                l.skipped.len(),
+                l.template_source.map(|t| t.segment),
+            )
+        });
+        let busy = self.job.is_some();
+        if ui
+            .add_enabled(!busy, egui::Button::new("🍃  Fit leaves"))
+            .on_hover_text("Reconstruct every leaf segment: PCA plane, ICP to the image boundary, deformation, texture")
+            .clicked()
+        {
+            self.fit_leaves();
+        }
+        match fit_summary {
+            Some((fitted, skipped, template)) => {
+                ui.label(format!(
+                    "{fitted} leaves fitted, {skipped} skipped{}{}",
+                    template
+                        .map_or_else(String::new, |t| format!("; generic leaf from segment {t}")),
+                    if up_to_date {
+                        ""
+                    } else {
+                        " — outdated by later edits"
+                    }
+                ));
+            }
+            None => {
+                ui.label("Leaves not fitted yet.");
+            }
+        }
+    }
+
+    fn branches_ui(&mut self, ui: &mut egui::Ui) {
+        let busy = self.job.is_some();
+        let Some(workspace) = self.workspace.as_deref() else {
+            return;
+        };
+        let tree = workspace.session.branches();
+        let initial = workspace.session.initial_skeleton();
+        ui.label(format!("{} branches", tree.branches.len()));
+        if let Some(error) = &initial.error {
+            ui.colored_label(
+                ui.visuals().warn_fg_color,
+                format!("No automatic skeleton: {error}"),
+            );
+        }
+        let mut run_skeleton = false;
+        if ui
+            .add_enabled(!busy, egui::Button::new("🌳  Automatic skeleton"))
+            .on_hover_text("Replace the branches by the skeleton of the non-leaf points (undoable)")
+            .clicked()
+        {
+            run_skeleton = true;
+        }
+        ui.separator();
+        TableBuilder::new(ui)
+            .striped(true)
+            .column(Column::auto().at_least(28.0))
+            .column(Column::auto().at_least(44.0))
+            .column(Column::auto().at_least(64.0))
+            .column(Column::auto().at_least(90.0))
+            .column(Column::remainder())
+            .header(20.0, |mut header| {
+                for title in ["Id", "Parent", "Length", "Radius", "Tip leaf"] {
+                    header.col(|ui| {
+                        ui.strong(title);
+                    });
+                }
+            })
+            .body(|body| {
+                body.rows(18.0, tree.branches.len(), |mut row| {
+                    let branch = &tree.branches[row.index()];
+                    row.col(|ui| {
+                        ui.label(branch.id.to_string());
+                    });
+                    row.col(|ui| {
+                        ui.label(branch.parent.map_or("—".into(), |p| p.to_string()));
+                    });
+                    row.col(|ui| {
+                        ui.label(format!("{:.1} mm", branch.cylinder.length() * 1e3));
+                    });
+                    row.col(|ui| {
+                        ui.label(format!(
+                            "{:.2}–{:.2} mm",
+                            branch.cylinder.radius_start * 1e3,
+                            branch.cylinder.radius_end * 1e3
+                        ));
+                    });
+                    row.col(|ui| {
+                        ui.label(if branch.leaf_at_tip { "yes" } else { "" });
+                    });
+                });
+            });
+        if run_skeleton {
+            self.automatic_skeleton();
+        }
+    }
+
+    fn history_ui(&mut self, ui: &mut egui::Ui) {
+        let Some(workspace) = self.workspace.as_deref_mut() else {
+            return;
+        };
+        let (entries, position) = {
+            let (history, position) = workspace.session.history();
+            let entries: Vec<String> = history.iter().map(|c| c.describe()).collect();
+            (entries, position)
+        };
+        ui.label(format!("{position} of {} edits applied", entries.len()));
+        ui.separator();
+        let mut go_to = None;
+        egui::ScrollArea::vertical().show(ui, |ui| {
+            if ui
+                .add(egui::Button::selectable(
+                    position == 0,
+                    "⏺  Automatic segmentation",
+                ))
+                .clicked()
+            {
+                go_to = Some(0);
+            }
+            for (index, text) in entries.iter().enumerate() {
+                let applied = index < position;
+                let label = format!("{:>3}  {text}", index + 1);
+                let rich = if applied {
+                    RichText::new(label)
+                } else {
+                    RichText::new(label).weak().italics()
+                };
+                if ui
+                    .add(egui::Button::selectable(index + 1 == position, rich))
+                    .clicked()
+                {
+                    go_to = Some(index + 1);
+                }
+            }
+        });
+        if let Some(target) = go_to {
+            self.panel.cancel_gesture();
+            workspace.go_to(target);
+        }
+    }
+
+    fn status_ui(&mut self, ui: &mut egui::Ui) {
+        ui.horizontal(|ui| {
+            if let Some(job) = &self.job {
+                let (stage, fraction) = job.progress.snapshot();
+                ui.spinner();
+                ui.label(format!("{} — {stage}", job.title));
+                let bar = match fraction {
+                    Some(f) => egui::ProgressBar::new(f).show_percentage(),
+                    None => egui::ProgressBar::new(0.0).animate(true),
+                };
+                ui.add(bar.desired_width(200.0));
+                if ui.button("Cancel").clicked() {
+                    job.progress.cancel();
+                }
+            } else if let Some(status) = &self.status {
+                if status.is_error {
+                    ui.colored_label(ui.visuals().error_fg_color, format!("⚠ {}", status.text));
+                } else {
+                    ui.label(&status.text);
+                }
+            } else if self.workspace.is_none() {
+                ui.label("Open a COLMAP folder (images/ + sparse/0, dense/0 or a model folder) or a .frond project.");
+            }
+            ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {
+                if self.show_frame_time {
+                    ui.monospace(format!("UI {:.1} ms", self.mean_frame_ms()));
+                }
+                if let Some(workspace) = &self.workspace {
+                    if workspace.is_dirty() {
+                        ui.colored_label(ui.visuals().warn_fg_color, "● unsaved");
+                    } else {
+                        ui.label("saved");
+                    }
+                }
+            });
+        });
+    }
+
+    fn central_ui(&mut self, ui: &mut egui::Ui) {
+        if let Some(autosave) = self.recovery.clone() {
+            egui::Frame::group(ui.style())
+                .fill(ui.visuals().faint_bg_color)
+                .show(ui, |ui| {
+                    ui.horizontal(|ui| {
+                        ui.label(format!(
+                            "Edits from an earlier session that were not saved are in the autosave {}.",
+                            autosave.display()
+                        ));
+                        if ui.button("Recover").clicked() {
+                            self.recover();
+                        }
+                        if ui.button("Discard").clicked() {
+                            self.discard_recovery();
+                        }
+                    });
+                });
+        }
+        let Some(workspace) = self.workspace.as_deref() else {
+            if let Some(job) = &self.job {
+                job_card(ui, job);
+            } else if let Some(message) = &self.open_error {
+                ui.heading("Could not open the scene");
+                ui.label(message.as_str());
+            } else {
+                self.welcome_ui(ui);
+            }
+            return;
+        };
+        ui.horizontal(|ui| {
+            ui.label(
+                RichText::new(format!("{}  {}", self.tool.icon(), self.tool.label())).strong(),
+            );
+            ui.label(RichText::new(self.tool.hint()).weak());
+        });
+        let actions = self.panel.ui(ui, workspace, self.tool);
+        if self.show_frame_time {
+            let points = workspace.session.segmentation().points.len();
+            let rect = ui.min_rect();
+            ui.painter().text(
+                rect.right_top() + egui::vec2(-10.0, 28.0),
+                egui::Align2::RIGHT_TOP,
+                format!("UI {:.1} ms · {points} points", self.mean_frame_ms()),
+                egui::FontId::monospace(12.0),
+                Color32::from_gray(200),
+            );
+        }
+        for action in actions {
+            match action {
+                Action::Apply(command) => self.apply(command),
+                Action::SetGenericLeaf(pick) => {
+                    if let Some(workspace) = self.workspace.as_deref_mut() {
+                        workspace.generic_leaf = Some(pick);
+                    }
+                    self.info(format!("generic leaf: segment {}", pick.segment));
+                }
+                Action::Message(text) => self.info(text),
+            }
+        }
+    }
+
+    fn welcome_ui(&mut self, ui: &mut egui::Ui) {
+        ui.vertical_centered(|ui| {
+            ui.add_space(ui.available_height() * 0.25);
+            ui.heading("Frond");
+            ui.label("Image-based plant modeling: from photos of a plant to an editable 3D model.");
+            ui.add_space(12.0);
+            if ui.button("📂  Open a COLMAP folder or project…").clicked() {
+                self.show_open_dialog();
+            }
+            if !self.recent.is_empty() {
+                ui.add_space(12.0);
+                ui.strong("Recent");
+                for path in self.recent.clone() {
+                    if ui.link(path.display().to_string()).clicked() {
+                        self.open(path);
+                    }
+                }
+            }
+        });
+    }
+
+    fn dialog_ui(&mut self, ctx: &egui::Context) {
+        let Some(mut dialog) = self.dialog.take() else {
+            return;
+        };
+        let mut keep = true;
+        let mut open = None;
+        let mut save = None;
+        let mut export = None;
+        let modal = egui::Modal::new(egui::Id::unique("frond_dialog")).show(ctx, |ui| {
+            ui.set_width(560.0);
+            match &mut dialog {
+                Dialog::Open {
+                    folder,
+                    path,
+                    entries,
+                } => {
+                    ui.heading("Open");
+                    ui.label("A COLMAP project (images/ + sparse/0), a dense/0 workspace, a model folder, or a .frond project.");
+                    let mut navigate = None;
+                    ui.horizontal(|ui| {
+                        if ui.button("⬆").on_hover_text("Parent folder").clicked()
+                            && let Some(parent) = folder.parent()
+                        {
+                            navigate = Some(parent.to_path_buf());
+                        }
+                        ui.label(folder.display().to_string());
+                    });
+                    egui::ScrollArea::vertical().max_height(280.0).show(ui, |ui| {
+                        match entries {
+                            Ok(entries) => {
+                                for entry in entries.iter() {
+                                    let icon = if entry.is_dir { "📁" } else { "🌿" };
+                                    let response = ui.selectable_label(
+                                        *path == entry.path.display().to_string(),
+                                        format!("{icon} {}", entry.name),
+                                    );
+                                    if response.clicked() {
+                                        *path = entry.path.display().to_string();
+                                    }
+                                    if response.double_clicked() {
+                                        if entry.is_dir {
+                                            navigate = Some(entry.path.clone());
+                                        } else {
+                                            open = Some(entry.path.clone());
+                                        }
+                                    }
+                                }
+                            }
+                            Err(message) => {
+                                ui.colored_label(ui.visuals().error_fg_color, message.as_str());
+                            }
+                        }
+                    });
+                    if let Some(next) = navigate {
+                        dialog = open_dialog(next);
+                        return;
+                    }
+                    ui.add(egui::TextEdit::singleline(path).desired_width(f32::INFINITY));
+                    ui.horizontal(|ui| {
+                        if ui.button("Open").clicked() && !path.trim().is_empty() {
+                            open = Some(PathBuf::from(path.trim()));
+                        }
+                        if ui.button("Cancel").clicked() {
+                            keep = false;
+                        }
+                    });
+                }
+                Dialog::SaveAs { path } => {
+                    ui.heading("Save project as");
+                    ui.add(egui::TextEdit::singleline(path).desired_width(f32::INFINITY));
+                    ui.horizontal(|ui| {
+                        if ui.button("Save").clicked() && !path.trim().is_empty() {
+                            let mut file = PathBuf::from(path.trim());
+                            if file.extension().is_none_or(|e| e != "frond") {
+                                file.set_extension("frond");
+                            }
+                            save = Some(file);
+                        }
+                        if ui.button("Cancel").clicked() {
+                            keep = false;
+                        }
+                    });
+                }
+                Dialog::Export { path } => {
+                    ui.heading("Export");
+                    ui.label("Writes plant.glb, plant.obj (+ materials and texture atlas), segmentation.ply and segments.json into the folder; leaves are fitted first if needed.");
+                    ui.add(egui::TextEdit::singleline(path).desired_width(f32::INFINITY));
+                    ui.horizontal(|ui| {
+                        if ui.button("Export").clicked() && !path.trim().is_empty() {
+                            export = Some(PathBuf::from(path.trim()));
+                        }
+                        if ui.button("Cancel").clicked() {
+                            keep = false;
+                        }
+                    });
+                }
+            }
+        });
+        if modal.should_close() {
+            keep = false;
+        }
+        if let Some(path) = open {
+            self.open(path);
+            keep = false;
+        }
+        if let Some(path) = save {
+            self.save_as(path);
+            keep = false;
+        }
+        if let Some(folder) = export {
+            self.export(folder);
+            keep = false;
+        }
+        if keep {
+            self.dialog = Some(dialog);
+        }
+    }
+
+    fn help_ui(&mut self, ctx: &egui::Context) {
+        let mut open = self.show_help;
+        egui::Window::new("Shortcuts")
+            .open(&mut open)
+            .resizable(false)
+            .show(ctx, |ui| {
+                egui::Grid::new("shortcuts").striped(true).show(ui, |ui| {
+                    let general = [
+                        ("Ctrl+O", "Open a COLMAP folder or project"),
+                        ("Ctrl+S / Ctrl+Shift+S", "Save / save as"),
+                        ("Ctrl+E", "Export glb, OBJ, PLY"),
+                        ("Ctrl+Z / Ctrl+Shift+Z", "Undo / redo"),
+                        ("← / →", "Previous / next photo"),
+                        ("F", "Fit the photo to the panel"),
+                        ("Scroll, middle or right drag", "Zoom, pan"),
+                        ("Esc", "Cancel the stroke or first click"),
+                        ("F1", "This help"),
+                        ("F12", "Frame time"),
+                    ];
+                    for (keys, what) in general {
+                        ui.monospace(keys);
+                        ui.label(what);
+                        ui.end_row();
+                    }
+                    for tool in Tool::all() {
+                        ui.monospace(tool.shortcut().name());
+                        ui.label(format!("{}: {}", tool.label(), tool.hint()));
+                        ui.end_row();
+                    }
+                });
+            });
+        self.show_help = open;
+    }
+}
+
+fn job_card(ui: &mut egui::Ui, job: &Job<Outcome>) {
+    ui.vertical_centered(|ui| {
+        ui.add_space(ui.available_height() * 0.3);
+        ui.heading(&job.title);
+        let (stage, fraction) = job.progress.snapshot();
+        ui.label(format!(
+            "{stage} · {:.0} s",
+            job.started.elapsed().as_secs_f64()
+        ));
+        let bar = match fraction {
+            Some(f) => egui::ProgressBar::new(f).show_percentage(),
+            None => egui::ProgressBar::new(0.0).animate(true),
+        };
+        ui.add(bar.desired_width(360.0));
+        if ui.button("Cancel").clicked() {
+            job.progress.cancel();
+        }
+    });
+}
+
+fn scene_ui(ui: &mut egui::Ui, workspace: &Workspace, panel: &mut ImagePanel) {
+    let scene = workspace.session.scene();
+    let model = &scene.reconstruction;
+    ui.label(format!(
+        "{} cameras · {} images · {} points · {} observations · {} format",
+        model.cameras().len(),
+        model.images().len(),
+        model.points().len(),
+        model.num_observations(),
+        scene.format
     ));
+    ui.separator();
+    for camera in model.cameras() {
+        egui::CollapsingHeader::new(format!(
+            "Camera {} · {} · {}×{}",
+            camera.id, camera.model, camera.width, camera.height
+        ))
+        .id_salt(("camera", camera.id))
+        .show(ui, |ui| {
+            egui::Grid::new(("camera_params", camera.id))
+                .striped(true)
+                .show(ui, |ui| {
+                    for (name, value) in camera.model.param_names().split(", ").zip(camera.params())
+                    {
+                        ui.label(name);
+                        ui.monospace(format!("{value:.6}"));
+                        ui.end_row();
+                    }
+                });
+        });
+    }
     ui.separator();
     TableBuilder::new(ui)
         .striped(true)
         .resizable(true)
-        .column(Column::auto().at_least(50.0))
-        .column(Column::initial(220.0).at_least(80.0))
+        .column(Column::auto().at_least(36.0))
+        .column(Column::initial(140.0).at_least(60.0))
         .column(Column::auto().at_least(60.0))
-        .column(Column::auto().at_least(80.0))
-        .column(Column::auto().at_least(90.0))
         .column(Column::remainder())
-        .header(22.0, |mut header| {
-            for title in ["Id", "Name", "Camera", "Keypoints", "Observations", "File"] {
+        .header(20.0, |mut header| {
+            for title in ["Id", "Name", "Points", "File"] {
                 header.col(|ui| {
                     ui.strong(title);
                 });
             }
         })
         .body(|body| {
-            body.rows(20.0, model.images().len(), |mut row| {
+            body.rows(18.0, model.images().len(), |mut row| {
                 let index = row.index();
                 let image = &model.images()[index];
-                row.set_selected(*selected == Some(index));
+                row.set_selected(panel.view == index);
                 row.col(|ui| {
                     ui.label(image.id.to_string());
                 });
@@ -269,17 +1339,11 @@ fn images_ui(ui: &mut egui::Ui, loaded: &LoadedScene, selected: &mut Option<usiz
                     ui.label(&image.name);
                 });
                 row.col(|ui| {
-                    ui.label(image.camera_id.to_string());
-                });
-                row.col(|ui| {
-                    ui.label(image.keypoints.len().to_string());
-                });
-                row.col(|ui| {
                     ui.label(image.num_observations().to_string());
                 });
                 row.col(|ui| {
-                    let status = &loaded.image_status[index];
-                    let text = status_text(status);
+                    let status = &workspace.image_status[index];
+                    let text = file_status_text(status);
                     if *status == ImageFileStatus::Present {
                         ui.label(text);
                     } else {
@@ -287,7 +1351,7 @@ fn images_ui(ui: &mut egui::Ui, loaded: &LoadedScene, selected: &mut Option<usiz
                     }
                 });
                 if row.response().clicked() {
-                    *selected = Some(index);
+                    panel.select_view(index);
                 }
             });
         });

@@ -1,0 +1,185 @@
+//! The editing tools: what each does, its shortcut, its cursor and the hint shown while it is
+//! active.
+
+use egui::{CursorIcon, Key};
+
+/// An editing tool of the image panel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Tool {
+    Navigate,
+    Confirm,
+    Split,
+    Merge,
+    MarkLeaf,
+    MarkNonLeaf,
+    Reset,
+    GenericLeaf,
+    DrawBranch,
+    MoveBranch,
+    Radius,
+    LeafAtTip,
+    DeleteBranch,
+}
+
+/// Tools grouped as the tool strip shows them.
+pub const TOOL_GROUPS: [(&str, &[Tool]); 3] = [
+    ("View", &[Tool::Navigate]),
+    (
+        "Segments",
+        &[
+            Tool::Confirm,
+            Tool::Split,
+            Tool::Merge,
+            Tool::MarkLeaf,
+            Tool::MarkNonLeaf,
+            Tool::Reset,
+            Tool::GenericLeaf,
+        ],
+    ),
+    (
+        "Branches",
+        &[
+            Tool::DrawBranch,
+            Tool::MoveBranch,
+            Tool::Radius,
+            Tool::LeafAtTip,
+            Tool::DeleteBranch,
+        ],
+    ),
+];
+
+impl Tool {
+    /// Every tool, in tool-strip order.
+    pub fn all() -> impl Iterator<Item = Tool> {
+        TOOL_GROUPS
+            .iter()
+            .flat_map(|(_, tools)| tools.iter().copied())
+    }
+
+    pub fn label(self) -> &'static str {
+        match self {
+            Tool::Navigate => "Navigate",
+            Tool::Confirm => "Confirm",
+            Tool::Split => "Split",
+            Tool::Merge => "Merge",
+            Tool::MarkLeaf => "Mark leaf",
+            Tool::MarkNonLeaf => "Mark non-leaf",
+            Tool::Reset => "Reset segment",
+            Tool::GenericLeaf => "Generic leaf",
+            Tool::DrawBranch => "Draw branch",
+            Tool::MoveBranch => "Move point",
+            Tool::Radius => "Radius",
+            Tool::LeafAtTip => "Leaf at tip",
+            Tool::DeleteBranch => "Delete branch",
+        }
+    }
+
+    pub fn icon(self) -> &'static str {
+        match self {
+            Tool::Navigate => "✋",
+            Tool::Confirm => "✔",
+            Tool::Split => "✂",
+            Tool::Merge => "🔗",
+            Tool::MarkLeaf => "🍃",
+            Tool::MarkNonLeaf => "⊘",
+            Tool::Reset => "⟲",
+            Tool::GenericLeaf => "★",
+            Tool::DrawBranch => "✏",
+            Tool::MoveBranch => "✥",
+            Tool::Radius => "◎",
+            Tool::LeafAtTip => "🌿",
+            Tool::DeleteBranch => "🗑",
+        }
+    }
+
+    pub fn shortcut(self) -> Key {
+        match self {
+            Tool::Navigate => Key::H,
+            Tool::Confirm => Key::C,
+            Tool::Split => Key::S,
+            Tool::Merge => Key::M,
+            Tool::MarkLeaf => Key::L,
+            Tool::MarkNonLeaf => Key::N,
+            Tool::Reset => Key::X,
+            Tool::GenericLeaf => Key::G,
+            Tool::DrawBranch => Key::B,
+            Tool::MoveBranch => Key::V,
+            Tool::Radius => Key::R,
+            Tool::LeafAtTip => Key::T,
+            Tool::DeleteBranch => Key::D,
+        }
+    }
+
+    /// What to do with the tool, shown under the image while it is active.
+    pub fn hint(self) -> &'static str {
+        match self {
+            Tool::Navigate => "Drag to pan, scroll to zoom, F to fit the photo.",
+            Tool::Confirm => "Click a leaf to accept it and compute its image boundary.",
+            Tool::Split => {
+                "Drag a stroke across a segment to split it along the stroke; hold Shift for a closed loop (inside vs outside)."
+            }
+            Tool::Merge => "Click a point of one segment, then a point of another, to merge them.",
+            Tool::MarkLeaf => "Click a segment to label it a leaf.",
+            Tool::MarkNonLeaf => {
+                "Click a segment to label it stem, pot or other (choose the label in the side panel)."
+            }
+            Tool::Reset => {
+                "Click a segment to return its points to their automatic segments and labels."
+            }
+            Tool::GenericLeaf => {
+                "Click a well-seen, flat, whole leaf: it becomes the generic leaf every leaf is fitted from."
+            }
+            Tool::DrawBranch => {
+                "Drag from a point on a branch along a stem or petiole; the points under the stroke give it depth."
+            }
+            Tool::MoveBranch => "Drag a control point (square) of a branch; children follow.",
+            Tool::Radius => "Drag out from a branch end (circle) to set its radius.",
+            Tool::LeafAtTip => "Click a branch to add or remove a leaf at its tip.",
+            Tool::DeleteBranch => "Click a branch to delete it and everything growing from it.",
+        }
+    }
+
+    pub fn cursor(self) -> CursorIcon {
+        match self {
+            Tool::Navigate => CursorIcon::Grab,
+            Tool::Split | Tool::DrawBranch => CursorIcon::Crosshair,
+            Tool::MoveBranch => CursorIcon::Move,
+            Tool::Radius => CursorIcon::ResizeHorizontal,
+            Tool::DeleteBranch => CursorIcon::NotAllowed,
+            _ => CursorIcon::PointingHand,
+        }
+    }
+
+    /// Whether the tool acts on segments (shown when the points overlay is on).
+    pub fn is_segment_tool(self) -> bool {
+        matches!(
+            self,
+            Tool::Confirm
+                | Tool::Split
+                | Tool::Merge
+                | Tool::MarkLeaf
+                | Tool::MarkNonLeaf
+                | Tool::Reset
+                | Tool::GenericLeaf
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_tool_has_its_own_shortcut_and_label() {
+        let tools: Vec<Tool> = Tool::all().collect();
+        assert_eq!(tools.len(), 13);
+        let mut keys: Vec<Key> = tools.iter().map(|t| t.shortcut()).collect();
+        keys.sort_by_key(|k| k.name());
+        keys.dedup();
+        assert_eq!(keys.len(), tools.len());
+        let mut labels: Vec<&str> = tools.iter().map(|t| t.label()).collect();
+        labels.sort();
+        labels.dedup();
+        assert_eq!(labels.len(), tools.len());
+    }
+}
