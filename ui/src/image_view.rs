@@ -149,6 +149,9 @@ fn gradient_image(scene: &Scene, view: usize) -> Result<ColorImage, String> {
     ))
 }
 
+/// The points seen in a view and their pixels (COLMAP convention).
+type ViewProjections = Arc<Vec<(u32, [f32; 2])>>;
+
 /// A drag of a branch handle in progress.
 #[derive(Clone, Copy, Debug)]
 enum BranchDrag {
@@ -180,7 +183,7 @@ pub struct ImagePanel {
     thumbnails: Vec<Option<TextureHandle>>,
     thumbnail_receiver: Option<Receiver<(usize, ColorImage)>>,
     /// Per view: the points seen in it and their pixels.
-    projections: HashMap<usize, Arc<Vec<(u32, [f32; 2])>>>,
+    projections: HashMap<usize, ViewProjections>,
     /// The scene shared with gradient workers (made on first use).
     shared_scene: Option<Arc<Scene>>,
     /// Leaf outlines as world segments, with the workspace revision of the fit.
@@ -402,7 +405,7 @@ impl ImagePanel {
         self.thumbnail_receiver = Some(receiver);
     }
 
-    fn projections(&mut self, workspace: &Workspace, view: usize) -> Arc<Vec<(u32, [f32; 2])>> {
+    fn projections(&mut self, workspace: &Workspace, view: usize) -> ViewProjections {
         Arc::clone(self.projections.entry(view).or_insert_with(|| {
             let session = &workspace.session;
             let model = &session.scene().reconstruction;
@@ -709,14 +712,19 @@ impl ImagePanel {
             pixel,
         };
         let primary = egui::PointerButton::Primary;
+        let press_origin = ui.input(|i| i.pointer.press_origin());
         let response = response.on_hover_cursor(tool.cursor());
         match tool {
             Tool::Navigate => {}
             Tool::Split | Tool::DrawBranch => {
                 if response.drag_started_by(primary)
-                    && let Some(p) = pointer_image
+                    && let Some(origin) = press_origin
                 {
-                    self.stroke = vec![p];
+                    // The drag starts where the button went down, not where it was noticed.
+                    self.stroke = vec![transform.image_from_screen(origin)];
+                    if let Some(p) = pointer_image {
+                        self.stroke.push(p);
+                    }
                 } else if response.dragged_by(primary)
                     && let Some(p) = pointer_image
                     && let Some(last) = self.stroke.last()
@@ -748,9 +756,9 @@ impl ImagePanel {
             }
             Tool::MoveBranch | Tool::Radius => {
                 if response.drag_started_by(primary)
-                    && let Some(p) = response.interact_pointer_pos()
+                    && let Some(origin) = press_origin
                 {
-                    self.drag = grab_handle(&handles, &transform, p, tool);
+                    self.drag = grab_handle(&handles, &transform, origin, tool);
                     if self.drag.is_none() {
                         actions.push(Action::Message(
                             if tool == Tool::MoveBranch {

@@ -30,6 +30,9 @@ use workspace::Workspace;
 /// How often unsaved edits are autosaved.
 pub const AUTOSAVE_INTERVAL: Duration = Duration::from_secs(30);
 
+/// Height of the filmstrip panel (points).
+const FILMSTRIP_HEIGHT: f32 = 104.0;
+
 /// What a finished job hands back.
 enum Outcome {
     Opened {
@@ -79,6 +82,8 @@ pub struct FrondApp {
     recent: Vec<PathBuf>,
     workspace: Option<Box<Workspace>>,
     job: Option<Job<Outcome>>,
+    /// Whether the running job holds the workspace.
+    workspace_busy: bool,
     /// The error of the last failed open, shown when nothing is open.
     open_error: Option<String>,
     pub panel: ImagePanel,
@@ -133,6 +138,7 @@ impl FrondApp {
             recent,
             workspace: None,
             job: None,
+            workspace_busy: false,
             open_error: None,
             panel: ImagePanel::default(),
             tool: Tool::Confirm,
@@ -239,6 +245,7 @@ impl FrondApp {
             return;
         };
         self.panel.cancel_gesture();
+        self.workspace_busy = true;
         self.job = Some(Job::spawn(title, move |progress: &JobProgress| {
             let result = work(&mut workspace, progress);
             Outcome::Worked { workspace, result }
@@ -388,6 +395,7 @@ impl FrondApp {
             }
             Poll::Lost => {
                 self.job = None;
+                self.workspace_busy = false;
                 self.fail("the worker stopped unexpectedly");
                 return;
             }
@@ -395,6 +403,7 @@ impl FrondApp {
         };
         let seconds = job.started.elapsed().as_secs_f64();
         self.job = None;
+        self.workspace_busy = false;
         match outcome {
             Outcome::Opened { path, result } => match result {
                 Ok(workspace) => {
@@ -549,16 +558,26 @@ impl FrondApp {
 
         egui::Panel::top("menu").show(ui, |ui| self.menu_ui(ui));
         egui::Panel::bottom("status").show(ui, |ui| self.status_ui(ui));
-        if self.workspace.is_some() {
+        // While work holds the workspace the panels stay (disabled), so nothing jumps.
+        if self.workspace.is_some() || self.workspace_busy {
+            let enabled = self.workspace.is_some();
             egui::Panel::left("tools")
                 .resizable(false)
                 .exact_size(132.0)
-                .show(ui, |ui| self.tools_ui(ui));
+                .show(ui, |ui| ui.add_enabled_ui(enabled, |ui| self.tools_ui(ui)));
             egui::Panel::right("side")
                 .default_size(320.0)
-                .show(ui, |ui| self.side_ui(ui));
+                .show(ui, |ui| {
+                    if enabled {
+                        self.side_ui(ui);
+                    } else {
+                        ui.add_space(8.0);
+                        ui.weak("Working…");
+                    }
+                });
             egui::Panel::bottom("filmstrip")
                 .resizable(false)
+                .exact_size(FILMSTRIP_HEIGHT)
                 .show(ui, |ui| {
                     if let Some(workspace) = self.workspace.as_deref() {
                         self.panel.filmstrip_ui(ui, workspace);
@@ -589,7 +608,7 @@ impl FrondApp {
         let title = match &self.workspace {
             Some(w) => format!(
                 "{}{} — Frond",
-                if w.is_dirty() { "● " } else { "" },
+                if w.is_dirty() { "• " } else { "" },
                 w.name()
             ),
             None => "Frond".to_owned(),
@@ -1016,7 +1035,7 @@ impl FrondApp {
                 }
                 if let Some(workspace) = &self.workspace {
                     if workspace.is_dirty() {
-                        ui.colored_label(ui.visuals().warn_fg_color, "● unsaved");
+                        ui.colored_label(ui.visuals().warn_fg_color, "• unsaved");
                     } else {
                         ui.label("saved");
                     }
@@ -1238,7 +1257,7 @@ impl FrondApp {
                         ("Ctrl+S / Ctrl+Shift+S", "Save / save as"),
                         ("Ctrl+E", "Export glb, OBJ, PLY"),
                         ("Ctrl+Z / Ctrl+Shift+Z", "Undo / redo"),
-                        ("← / →", "Previous / next photo"),
+                        ("Left / Right", "Previous / next photo"),
                         ("F", "Fit the photo to the panel"),
                         ("Scroll, middle or right drag", "Zoom, pan"),
                         ("Esc", "Cancel the stroke or first click"),

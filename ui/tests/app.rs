@@ -1,12 +1,24 @@
-//! Headless interaction tests of the GUI (egui_kittest): open the bundled fixture and check
-//! that cameras and images are listed; open a bad folder and check the error is shown.
+//! Headless interaction tests of the GUI (egui_kittest) on a synthetic plant: each tool is
+//! used through pointer and keyboard events on the image panel, and the library Session's state
+//! is checked; saving, autosave recovery, fitting, cancelling and export go through the menus
+//! and dialogs.
 
 use std::path::{Path, PathBuf};
-use std::time::Duration;
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
 
+use egui::{Event, Key, Modifiers, PointerButton, Pos2};
 use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
+use frond::edit::{Project, Session};
+use frond::graph::pipeline::SegmentLabel;
+use frond::synth::{Preset, SynthOptions, write_dataset};
+use frond::util::progress::NoProgress;
 use frond_ui::FrondApp;
+use frond_ui::files::ConfigDir;
+use frond_ui::tools::Tool;
+use nalgebra::Point3;
+use tempfile::TempDir;
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -14,40 +26,547 @@ fn fixture(name: &str) -> PathBuf {
         .join(name)
 }
 
-fn harness(path: PathBuf) -> Harness<'static, FrondApp> {
+/// A small synthetic broadleaf plant with its photos (written once per test binary).
+fn dataset() -> &'static Path {
+    static DIR: OnceLock<(TempDir, PathBuf)> = OnceLock::new();
+    &DIR.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path().join("plant");
+        let options = SynthOptions {
+            preset: Preset::Broadleaf,
+            seed: 43,
+            views: 8,
+            width: 480,
+            height: 360,
+            target_points: 12_000,
+            ..SynthOptions::default()
+        };
+        write_dataset(&options, &root, &NoProgress).unwrap();
+        (dir, root)
+    })
+    .1
+}
+
+fn harness_with(path: PathBuf, config: &Path) -> Harness<'static, FrondApp> {
+    let config = ConfigDir {
+        dir: config.to_path_buf(),
+    };
     let mut harness = Harness::builder()
-        .with_size(egui::vec2(1200.0, 800.0))
+        .with_size(egui::vec2(1400.0, 900.0))
         .build_ui_state(
             |ui, app: &mut FrondApp| app.window_ui(ui),
-            FrondApp::new(Some(path)),
+            FrondApp::with_config(Some(path), Some(config)),
         );
-    for _ in 0..500 {
-        harness.step();
-        if !harness.state().is_loading() {
-            break;
-        }
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    harness.step();
-    harness.step();
+    settle(&mut harness);
     harness
 }
 
+/// Steps until no work runs and every photo has been decoded.
+fn settle(harness: &mut Harness<'static, FrondApp>) {
+    let deadline = Instant::now() + Duration::from_secs(300);
+    loop {
+        harness.step();
+        let app = harness.state();
+        if !app.is_busy() && app.panel.is_idle() {
+            break;
+        }
+        assert!(Instant::now() < deadline, "the GUI stayed busy for 300 s");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    harness.step();
+    harness.step();
+}
+
+fn session<'h>(harness: &'h Harness<'static, FrondApp>) -> &'h Session {
+    &harness
+        .state()
+        .workspace()
+        .expect("a workspace is open")
+        .session
+}
+
+fn screen(harness: &Harness<'static, FrondApp>, uv: [f64; 2]) -> Pos2 {
+    harness
+        .state()
+        .panel
+        .transform
+        .expect("the image panel was drawn")
+        .screen_from_image(uv)
+}
+
+fn press(harness: &mut Harness<'static, FrondApp>, pos: Pos2, pressed: bool) {
+    harness.event(Event::PointerButton {
+        pos,
+        button: PointerButton::Primary,
+        pressed,
+        modifiers: Modifiers::NONE,
+    });
+    harness.step();
+}
+
+fn click(harness: &mut Harness<'static, FrondApp>, uv: [f64; 2]) {
+    let pos = screen(harness, uv);
+    harness.hover_at(pos);
+    harness.step();
+    press(harness, pos, true);
+    press(harness, pos, false);
+    harness.step();
+}
+
+fn drag(harness: &mut Harness<'static, FrondApp>, stroke: &[[f64; 2]]) {
+    let points: Vec<Pos2> = stroke.iter().map(|&uv| screen(harness, uv)).collect();
+    harness.hover_at(points[0]);
+    harness.step();
+    press(harness, points[0], true);
+    for &p in &points[1..] {
+        harness.hover_at(p);
+        harness.step();
+    }
+    press(harness, points[points.len() - 1], false);
+    harness.step();
+}
+
+fn key(harness: &mut Harness<'static, FrondApp>, key: Key) {
+    harness.key_press(key);
+    harness.step();
+    harness.step();
+}
+
+fn shortcut(harness: &mut Harness<'static, FrondApp>, modifiers: Modifiers, key: Key) {
+    harness.key_press_modifiers(modifiers, key);
+    harness.step();
+    harness.step();
+}
+
+fn project(session: &Session, view: usize, p: &Point3<f64>) -> [f64; 2] {
+    let model = &session.scene().reconstruction;
+    let uv = model.project(&model.images()[view], p).unwrap();
+    [uv.x, uv.y]
+}
+
+/// Leaf segments seen in view 0, largest first, each with its points' pixels there.
+fn leaves_in_view(session: &Session) -> Vec<(u32, Vec<[f64; 2]>)> {
+    let points = &session.segmentation().points;
+    let mut leaves: Vec<(u32, Vec<[f64; 2]>)> = session
+        .leaf_ids()
+        .iter()
+        .copied()
+        .filter(|&id| id >= 0)
+        .collect::<std::collections::BTreeSet<i64>>()
+        .into_iter()
+        .map(|id| {
+            let pixels = session
+                .members(id as u32)
+                .into_iter()
+                .filter(|&p| points.views[p as usize].binary_search(&0).is_ok())
+                .map(|p| project(session, 0, &points.positions[p as usize]))
+                .collect();
+            (id as u32, pixels)
+        })
+        .collect();
+    leaves.sort_by_key(|(_, pixels)| std::cmp::Reverse(pixels.len()));
+    leaves
+}
+
+/// The pixel of a leaf's point nearest its projected centroid.
+fn central_pixel(pixels: &[[f64; 2]]) -> [f64; 2] {
+    let n = pixels.len() as f64;
+    let c = pixels
+        .iter()
+        .fold([0.0, 0.0], |a, p| [a[0] + p[0] / n, a[1] + p[1] / n]);
+    *pixels
+        .iter()
+        .min_by(|a, b| {
+            let da = (a[0] - c[0]).hypot(a[1] - c[1]);
+            let db = (b[0] - c[0]).hypot(b[1] - c[1]);
+            da.total_cmp(&db)
+        })
+        .unwrap()
+}
+
+fn segment_at(session: &Session, view: usize, uv: [f64; 2]) -> u32 {
+    let image_id = session.scene().reconstruction.images()[view].id;
+    session
+        .pick_segment(&frond::edit::PixelRef {
+            image_id,
+            pixel: uv,
+        })
+        .unwrap()
+}
+
+fn history_len(harness: &Harness<'static, FrondApp>) -> (usize, usize) {
+    let (history, position) = session(harness).history();
+    (history.len(), position)
+}
+
 #[test]
-fn opening_a_colmap_folder_lists_cameras_and_images() {
-    let harness = harness(fixture("toy_scene"));
-    let loaded = harness.state().loaded().expect("fixture loads");
-    assert_eq!(loaded.scene.reconstruction.images().len(), 8);
+fn segment_tools_edit_the_session_with_undo_and_redo() {
+    let config = tempfile::tempdir().unwrap();
+    let mut harness = harness_with(dataset().to_path_buf(), config.path());
+    let leaves = leaves_in_view(session(&harness));
+    assert!(leaves.len() >= 4, "{} leaves in view 0", leaves.len());
+    let a = central_pixel(&leaves[0].1);
+    let b = central_pixel(&leaves[1].1);
+    let c = central_pixel(&leaves[2].1);
+    let segment_a = segment_at(session(&harness), 0, a);
+    let segment_b = segment_at(session(&harness), 0, b);
+    assert_ne!(segment_a, segment_b);
+
+    // Confirm (the default tool): one click.
+    assert_eq!(harness.state().tool, Tool::Confirm);
+    click(&mut harness, a);
+    let state = session(&harness).segments()[segment_a as usize].unwrap();
+    assert!(state.confirmed, "{:?}", harness.state().status());
+    assert!(session(&harness).boundary(segment_a, 0).is_some());
+
+    // Merge: two clicks.
+    key(&mut harness, Key::M);
+    assert_eq!(harness.state().tool, Tool::Merge);
+    click(&mut harness, a);
+    click(&mut harness, b);
+    assert_eq!(
+        segment_at(session(&harness), 0, a),
+        segment_at(session(&harness), 0, b),
+        "{:?}",
+        harness.state().status()
+    );
+    assert_eq!(history_len(&harness), (2, 2));
+
+    // Undo and redo from the keyboard.
+    shortcut(&mut harness, Modifiers::COMMAND, Key::Z);
+    assert_eq!(history_len(&harness), (2, 1));
+    assert_ne!(
+        segment_at(session(&harness), 0, a),
+        segment_at(session(&harness), 0, b)
+    );
+    shortcut(&mut harness, Modifiers::COMMAND | Modifiers::SHIFT, Key::Z);
+    assert_eq!(history_len(&harness), (2, 2));
+    shortcut(&mut harness, Modifiers::COMMAND, Key::Z);
+
+    // Split: a stroke across leaf A through its centre, across its narrow extent.
+    key(&mut harness, Key::S);
+    let pixels = &leaves[0].1;
+    let (min_y, max_y) = pixels.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
+        (lo.min(p[1]), hi.max(p[1]))
+    });
+    let (min_x, max_x) = pixels.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
+        (lo.min(p[0]), hi.max(p[0]))
+    });
+    let stroke: Vec<[f64; 2]> = if max_x - min_x >= max_y - min_y {
+        // Wide leaf: a vertical stroke.
+        (0..=12)
+            .map(|k| {
+                [
+                    a[0],
+                    min_y - 15.0 + (max_y - min_y + 30.0) * k as f64 / 12.0,
+                ]
+            })
+            .collect()
+    } else {
+        (0..=12)
+            .map(|k| {
+                [
+                    min_x - 15.0 + (max_x - min_x + 30.0) * k as f64 / 12.0,
+                    a[1],
+                ]
+            })
+            .collect()
+    };
+    drag(&mut harness, &stroke);
+    assert_eq!(
+        history_len(&harness),
+        (2, 2),
+        "{:?}",
+        harness.state().status()
+    );
+    let after: std::collections::BTreeSet<u32> = pixels
+        .iter()
+        .filter_map(|&uv| {
+            let image_id = session(&harness).scene().reconstruction.images()[0].id;
+            session(&harness)
+                .pick_segment(&frond::edit::PixelRef {
+                    image_id,
+                    pixel: uv,
+                })
+                .ok()
+        })
+        .collect();
+    assert!(after.len() >= 2, "leaf A is still one segment: {after:?}");
+
+    // Mark non-leaf, mark leaf, reset.
+    key(&mut harness, Key::N);
+    click(&mut harness, c);
+    let segment_c = segment_at(session(&harness), 0, c);
+    assert_eq!(
+        session(&harness).segments()[segment_c as usize]
+            .unwrap()
+            .label,
+        SegmentLabel::Stem
+    );
+    key(&mut harness, Key::L);
+    click(&mut harness, c);
+    assert_eq!(
+        session(&harness).segments()[segment_c as usize]
+            .unwrap()
+            .label,
+        SegmentLabel::Leaf
+    );
+    key(&mut harness, Key::X);
+    click(&mut harness, c);
+    assert_eq!(history_len(&harness), (5, 5));
+
+    // Generic leaf: a setting for the next fit, not an edit.
+    key(&mut harness, Key::G);
+    click(&mut harness, b);
+    let pick = harness.state().workspace().unwrap().generic_leaf.unwrap();
+    assert_eq!(pick.segment, segment_at(session(&harness), 0, b));
+    assert_eq!(pick.view, Some(0));
+    assert_eq!(history_len(&harness), (5, 5));
+
+    // The history panel lists the edits; clicking the first row goes back to it.
+    harness.get_by_label("History").click();
+    harness.step();
+    harness.step();
+    harness.get_by_label_contains("5 of 5 edits applied");
+    harness.get_by_label_contains("1  confirm segment").click();
+    harness.step();
+    harness.step();
+    assert_eq!(history_len(&harness), (5, 1));
+    harness
+        .get_by_label_contains("Automatic segmentation")
+        .click();
+    harness.step();
+    assert_eq!(history_len(&harness), (5, 0));
+    assert!(
+        !session(&harness).segments()[segment_a as usize]
+            .unwrap()
+            .confirmed
+    );
+}
+
+/// The main stem's skeleton pixel at arc-length fraction `s` in view 0.
+fn branch_pixel(session: &Session, branch: u32, s: f64) -> [f64; 2] {
+    let branch = session.branches().get(branch).unwrap();
+    project(session, 0, &branch.cylinder.skeleton.point_at_fraction(s))
+}
+
+#[test]
+fn branch_tools_edit_the_branch_tree_with_undo() {
+    let config = tempfile::tempdir().unwrap();
+    let mut harness = harness_with(dataset().to_path_buf(), config.path());
+    let before = session(&harness).branches().branches.len();
+    assert!(before >= 1, "the automatic skeleton found no stem");
+    let stem = session(&harness).branches().branches[0].id;
+
+    // Draw a branch from the stem's middle, out to the side.
+    key(&mut harness, Key::B);
+    let start = branch_pixel(session(&harness), stem, 0.5);
+    let stroke: Vec<[f64; 2]> = (0..=10)
+        .map(|k| [start[0] + 6.0 * k as f64, start[1] - 2.0 * k as f64])
+        .collect();
+    drag(&mut harness, &stroke);
+    let tree = session(&harness).branches();
+    assert_eq!(
+        tree.branches.len(),
+        before + 1,
+        "{:?}",
+        harness.state().status()
+    );
+    let drawn = tree.branches.last().unwrap().clone();
+    assert!(drawn.parent.is_some());
+
+    // Move its last control point 25 px down.
+    key(&mut harness, Key::V);
+    let last = drawn.cylinder.skeleton.control_points().len() - 1;
+    let tip = project(
+        session(&harness),
+        0,
+        &drawn.cylinder.skeleton.control_points()[last],
+    );
+    drag(
+        &mut harness,
+        &[
+            tip,
+            [tip[0], tip[1] + 8.0],
+            [tip[0], tip[1] + 16.0],
+            [tip[0], tip[1] + 25.0],
+        ],
+    );
+    let moved = session(&harness).branches().get(drawn.id).unwrap().clone();
+    let moved_tip = project(
+        session(&harness),
+        0,
+        &moved.cylinder.skeleton.control_points()[last],
+    );
+    assert!(
+        (moved_tip[1] - (tip[1] + 25.0)).abs() < 3.0 && (moved_tip[0] - tip[0]).abs() < 3.0,
+        "tip {tip:?} moved to {moved_tip:?}: {:?}",
+        harness.state().status()
+    );
+
+    // Drag the end's radius out to 6 px.
+    key(&mut harness, Key::R);
+    drag(
+        &mut harness,
+        &[
+            moved_tip,
+            [moved_tip[0] + 2.0, moved_tip[1]],
+            [moved_tip[0] + 4.0, moved_tip[1]],
+            [moved_tip[0] + 6.0, moved_tip[1]],
+        ],
+    );
+    let widened = session(&harness).branches().get(drawn.id).unwrap().clone();
+    assert_ne!(
+        widened.cylinder.radius_end,
+        moved.cylinder.radius_end,
+        "{:?}",
+        harness.state().status()
+    );
+    assert!(widened.cylinder.radius_end > 0.0);
+
+    // Leaf at tip, then delete, by clicking near the branch's outer part.
+    key(&mut harness, Key::T);
+    let on_branch = branch_pixel(session(&harness), drawn.id, 0.85);
+    click(&mut harness, on_branch);
+    assert!(
+        session(&harness)
+            .branches()
+            .get(drawn.id)
+            .unwrap()
+            .leaf_at_tip,
+        "{:?}",
+        harness.state().status()
+    );
+    key(&mut harness, Key::D);
+    click(&mut harness, on_branch);
+    assert!(session(&harness).branches().get(drawn.id).is_none());
+    assert_eq!(session(&harness).branches().branches.len(), before);
+    assert_eq!(history_len(&harness), (5, 5));
+
+    shortcut(&mut harness, Modifiers::COMMAND, Key::Z);
+    assert!(session(&harness).branches().get(drawn.id).is_some());
+}
+
+#[test]
+fn saving_autosave_and_crash_recovery_keep_the_edits() {
+    let config = tempfile::tempdir().unwrap();
+    let mut harness = harness_with(dataset().to_path_buf(), config.path());
+    let leaves = leaves_in_view(session(&harness));
+    click(&mut harness, central_pixel(&leaves[0].1));
+    assert_eq!(history_len(&harness), (1, 1));
+    assert!(harness.state().workspace().unwrap().is_dirty());
+    harness.get_by_label("• unsaved");
+
+    // Autosave, then "crash" (drop the window without saving).
+    harness.state_mut().autosave_interval = Duration::ZERO;
+    harness.step();
+    let autosave = ConfigDir {
+        dir: config.path().to_path_buf(),
+    }
+    .autosave_path(dataset());
+    assert!(autosave.is_file(), "no autosave at {}", autosave.display());
+    drop(harness);
+
+    let mut harness = harness_with(dataset().to_path_buf(), config.path());
+    assert_eq!(harness.state().recovery(), Some(autosave.as_path()));
+    assert_eq!(history_len(&harness), (0, 0));
+    harness.get_by_label("Recover").click();
+    settle(&mut harness);
+    assert_eq!(history_len(&harness), (1, 1));
+    assert!(harness.state().workspace().unwrap().is_dirty());
+
+    // Save through the Save-as dialog (Ctrl+S on unsaved work asks where).
+    shortcut(&mut harness, Modifiers::COMMAND, Key::S);
+    harness.get_by_label("Save project as");
+    harness.get_by_label("Save").click();
+    harness.step();
+    harness.step();
+    let project_path = dataset().parent().unwrap().join("plant.frond");
+    let project = Project::read(&project_path).unwrap();
+    assert_eq!((project.history.len(), project.position), (1, 1));
+    assert!(!harness.state().workspace().unwrap().is_dirty());
+    assert!(!autosave.exists(), "the autosave outlived the save");
+    assert_eq!(
+        harness.state().recent()[0],
+        project_path.canonicalize().unwrap()
+    );
+    drop(harness);
+
+    // Reopening the project replays its history; nothing to recover.
+    let harness = harness_with(project_path.clone(), config.path());
+    assert_eq!(history_len(&harness), (1, 1));
+    assert_eq!(harness.state().recovery(), None);
+    assert!(!harness.state().workspace().unwrap().is_dirty());
+    std::fs::remove_file(project_path).unwrap();
+}
+
+#[test]
+fn fitting_runs_off_thread_can_be_cancelled_and_exports() {
+    let config = tempfile::tempdir().unwrap();
+    let mut harness = harness_with(dataset().to_path_buf(), config.path());
+    let edits = history_len(&harness);
+
+    // Cancel at once: the session comes back untouched, without leaves.
+    harness.get_by_label("🍃  Fit leaves").click();
+    harness.step();
+    harness.step();
+    assert!(harness.state().is_busy());
+    // One in the status bar, one on the work's card.
+    assert_eq!(harness.get_all_by_label("Cancel").count(), 2);
+    harness.get_all_by_label("Cancel").next().unwrap().click();
+    settle(&mut harness);
+    let status = harness.state().status().unwrap().clone();
+    assert!(
+        status.is_error && status.text.contains("cancelled"),
+        "{status:?}"
+    );
+    assert!(harness.state().workspace().unwrap().leaves.is_none());
+    assert_eq!(history_len(&harness), edits);
+
+    // Export fits first, then writes every format.
+    let out = tempfile::tempdir().unwrap();
+    let folder = out.path().join("export");
+    harness.state_mut().export(folder.clone());
+    settle(&mut harness);
+    let status = harness.state().status().unwrap().clone();
+    assert!(!status.is_error, "{status:?}");
+    let workspace = harness.state().workspace().unwrap();
+    let fitted = workspace.current_leaves().expect("fitted").leaves.len();
+    assert!(fitted >= 3, "{fitted} leaves fitted");
+    for file in [
+        "plant.glb",
+        "plant.obj",
+        "plant.mtl",
+        "segmentation.ply",
+        "segments.json",
+    ] {
+        assert!(folder.join(file).is_file(), "{file} missing: {status:?}");
+    }
+    // The fitted leaves' outlines are drawn; the side panel reports the fit.
+    harness.get_by_label_contains(&format!("{fitted} leaves fitted"));
+}
+
+#[test]
+fn the_scene_tab_lists_cameras_and_images_of_a_colmap_fixture() {
+    let config = tempfile::tempdir().unwrap();
+    let mut harness = harness_with(fixture("toy_scene"), config.path());
+    if let Some(error) = harness.state().error() {
+        panic!("the fixture did not open: {error}");
+    }
+    harness.get_by_label("Scene").click();
+    harness.step();
+    harness.step();
     harness.get_by_label_contains("Camera 1 · SIMPLE_RADIAL · 240×180");
-    harness.get_by_label_contains("Images (8 registered, 8 files present)");
-    harness.get_by_label("view_0000.png");
+    // In the filmstrip and in the table.
+    assert!(harness.get_all_by_label("view_0000.png").count() >= 2);
     harness.get_by_label_contains("1500 points");
 }
 
 #[test]
 fn opening_a_folder_without_a_model_shows_the_error() {
+    let config = tempfile::tempdir().unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let harness = harness(dir.path().to_path_buf());
+    let harness = harness_with(dir.path().to_path_buf(), config.path());
     let error = harness.state().error().expect("load fails").to_owned();
     assert!(error.contains("no COLMAP model found"), "{error}");
     harness.get_by_label("Could not open the scene");
