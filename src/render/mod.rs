@@ -386,6 +386,17 @@ impl Renderer {
         }))
         .map_err(|e| RenderError::Device(e.to_string()))?;
         tracing::info!(adapter = %adapter_info.name, backend = ?adapter_info.backend, "renderer ready");
+        Self::with_device(device, queue, adapter_info)
+    }
+
+    /// A renderer on an existing device (the GUI's, so its frames can be drawn into the
+    /// window's render pass).
+    pub fn with_device(
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+        adapter_info: wgpu::AdapterInfo,
+    ) -> Result<Self, RenderError> {
+        let limits = device.limits();
 
         let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("frond shader"),
@@ -814,7 +825,12 @@ impl Renderer {
         let color_msaa = texture("colour msaa", COLOR_FORMAT, COLOR_SAMPLES, attachment);
         let depth_msaa = texture("depth msaa", DEPTH_FORMAT, COLOR_SAMPLES, attachment);
         let depth_single = texture("depth", DEPTH_FORMAT, 1, attachment);
-        let color_resolved = texture("colour", COLOR_FORMAT, 1, readable);
+        let color_resolved = texture(
+            "colour",
+            COLOR_FORMAT,
+            1,
+            readable | wgpu::TextureUsages::TEXTURE_BINDING,
+        );
         self.targets = Some(Targets {
             width,
             height,
@@ -1034,6 +1050,39 @@ impl Renderer {
         let color = RgbaImage::from_raw(width, height, bytes.pop().unwrap_or_default())
             .ok_or_else(|| RenderError::Readback("colour buffer has the wrong size".into()))?;
         Ok((stats, Some(color)))
+    }
+
+    /// Encodes a colour frame of the static meshes into `encoder` without submitting it (the
+    /// GUI's 3D panel: the caller submits with its own work, then samples
+    /// [`Renderer::color_view`]). Returns the draw calls and triangles encoded.
+    pub fn encode_color_frame(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        scene: &GpuScene,
+        camera: &ViewCamera,
+        lighting: &Lighting,
+        background: [f64; 4],
+    ) -> Result<(usize, usize), RenderError> {
+        self.check_size(camera.width, camera.height)?;
+        self.ensure_targets(camera.width, camera.height);
+        let view_group = self.view_bind_group(camera, lighting);
+        let Some(targets) = self.targets.as_ref() else {
+            return Err(RenderError::Readback("render targets missing".into()));
+        };
+        let [r, g, b, a] = background;
+        let mut pass = begin_color_pass(encoder, targets, wgpu::Color { r, g, b, a });
+        Ok(draw_meshes(
+            &mut pass,
+            &self.color_pipeline,
+            &view_group,
+            scene,
+            &self.identity_instance,
+        ))
+    }
+
+    /// The resolved colour of the last frame (sRGB, single-sampled, bindable as a texture).
+    pub fn color_view(&self) -> Option<&wgpu::TextureView> {
+        self.targets.as_ref().map(|t| &t.color_resolved_view)
     }
 
     /// Renders `scene` from `camera`: colour, depth and object ids.

@@ -9,6 +9,7 @@ pub mod files;
 pub mod image_view;
 pub mod jobs;
 pub mod tools;
+pub mod view3d;
 pub mod workspace;
 
 use std::collections::VecDeque;
@@ -25,6 +26,7 @@ use files::{ConfigDir, DirEntry, list_dir, recoverable_autosave};
 use image_view::{Action, ImagePanel};
 use jobs::{Job, JobProgress, Poll};
 use tools::{TOOL_GROUPS, Tool};
+use view3d::View3d;
 use workspace::Workspace;
 
 /// How often unsaved edits are autosaved.
@@ -46,11 +48,55 @@ enum Outcome {
     },
 }
 
+/// A frame-time benchmark: once the scene is open (and the leaves fitted, if asked), the 3D
+/// view orbits a little every frame and each frame's time is recorded.
+#[derive(Clone, Debug, Default)]
+pub struct Benchmark {
+    pub frames: usize,
+    pub fit_leaves: bool,
+    /// Where the result goes (JSON); printed on stdout as well.
+    pub out: Option<PathBuf>,
+    fit_started: bool,
+    /// Whole-frame CPU times (ms) as eframe reports them, and UI build times (ms).
+    paint_ms: Vec<f32>,
+    ui_ms: Vec<f32>,
+    warmup: usize,
+}
+
+impl Benchmark {
+    pub fn new(frames: usize, fit_leaves: bool, out: Option<PathBuf>) -> Self {
+        Self {
+            frames,
+            fit_leaves,
+            out,
+            warmup: 10,
+            ..Self::default()
+        }
+    }
+}
+
+fn percentile(values: &[f32], q: f64) -> f32 {
+    let mut sorted = values.to_vec();
+    sorted.sort_by(f32::total_cmp);
+    sorted
+        .get(((sorted.len().max(1) - 1) as f64 * q).round() as usize)
+        .copied()
+        .unwrap_or(0.0)
+}
+
 /// A message in the status bar.
 #[derive(Clone, Debug)]
 pub struct Status {
     pub text: String,
     pub is_error: bool,
+}
+
+/// What the central area shows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CentralLayout {
+    Photo,
+    ThreeD,
+    Both,
 }
 
 /// The side panel's tabs.
@@ -87,6 +133,10 @@ pub struct FrondApp {
     /// The error of the last failed open, shown when nothing is open.
     open_error: Option<String>,
     pub panel: ImagePanel,
+    pub view3d: View3d,
+    /// Whether the render core is installed in the window (a wgpu window, not a test).
+    gpu: bool,
+    pub layout: CentralLayout,
     pub tool: Tool,
     pub side_tab: SideTab,
     status: Option<Status>,
@@ -99,6 +149,13 @@ pub struct FrondApp {
     last_autosave: Instant,
     /// Recent UI build times (ms).
     frame_times: VecDeque<f32>,
+    /// Recent whole-frame CPU times reported by eframe (ms): UI, tessellation, the 3D
+    /// panel's render and the window's paint, without waiting for vsync.
+    paint_times: VecDeque<f32>,
+    /// A frame-time benchmark in progress (`frond-ui --benchmark-frames`).
+    pub benchmark: Option<Benchmark>,
+    /// Fit the leaves as soon as the scene is open (`frond-ui --fit-leaves`).
+    pub fit_leaves_when_open: bool,
     title: String,
 }
 
@@ -141,6 +198,9 @@ impl FrondApp {
             workspace_busy: false,
             open_error: None,
             panel: ImagePanel::default(),
+            view3d: View3d::default(),
+            gpu: false,
+            layout: CentralLayout::Both,
             tool: Tool::Confirm,
             side_tab: SideTab::Segments,
             status: None,
@@ -151,12 +211,23 @@ impl FrondApp {
             autosave_interval: AUTOSAVE_INTERVAL,
             last_autosave: Instant::now(),
             frame_times: VecDeque::new(),
+            paint_times: VecDeque::new(),
+            benchmark: None,
+            fit_leaves_when_open: false,
             title: String::new(),
         };
         if let Some(path) = initial {
             app.open(path);
         }
         app
+    }
+
+    /// Installs the render core for the 3D panel on the window's wgpu device.
+    pub fn install_gpu(&mut self, render_state: &eframe::egui_wgpu::RenderState) {
+        match view3d::View3dResources::install(render_state) {
+            Ok(()) => self.gpu = true,
+            Err(e) => self.fail(format!("the 3D view is unavailable: {e}")),
+        }
     }
 
     /// The open work.
@@ -421,6 +492,7 @@ impl FrondApp {
                     }
                     let (leaves, _, _) = workspace.segment_counts();
                     self.panel.reset();
+                    self.view3d.reset();
                     self.workspace = Some(workspace);
                     self.open_error = None;
                     self.last_autosave = Instant::now();
@@ -428,6 +500,9 @@ impl FrondApp {
                         "opened {} in {seconds:.1} s: {leaves} leaf segments",
                         path.display()
                     ));
+                    if std::mem::take(&mut self.fit_leaves_when_open) {
+                        self.fit_leaves();
+                    }
                 }
                 Err(message) => {
                     self.fail(format!("could not open {}: {message}", path.display()));
@@ -563,7 +638,7 @@ impl FrondApp {
             let enabled = self.workspace.is_some();
             egui::Panel::left("tools")
                 .resizable(false)
-                .exact_size(132.0)
+                .exact_size(150.0)
                 .show(ui, |ui| ui.add_enabled_ui(enabled, |ui| self.tools_ui(ui)));
             egui::Panel::right("side")
                 .default_size(320.0)
@@ -594,6 +669,101 @@ impl FrondApp {
         if self.frame_times.len() > 60 {
             self.frame_times.pop_front();
         }
+        self.benchmark_step(&ctx, ms);
+    }
+
+    /// Records whole-frame CPU time as eframe reports it (for the previous frame).
+    pub fn report_frame_time(&mut self, seconds: Option<f32>) {
+        if let Some(seconds) = seconds {
+            self.paint_times.push_back(seconds * 1000.0);
+            if self.paint_times.len() > 60 {
+                self.paint_times.pop_front();
+            }
+        }
+    }
+
+    /// Mean whole-frame CPU time over the last frames (ms), when running in a window.
+    pub fn mean_paint_ms(&self) -> Option<f32> {
+        (!self.paint_times.is_empty())
+            .then(|| self.paint_times.iter().sum::<f32>() / self.paint_times.len() as f32)
+    }
+
+    fn frame_time_text(&self) -> String {
+        match self.mean_paint_ms() {
+            Some(frame) => format!("frame {frame:.1} ms · UI {:.1} ms", self.mean_frame_ms()),
+            None => format!("UI {:.1} ms", self.mean_frame_ms()),
+        }
+    }
+
+    fn benchmark_step(&mut self, ctx: &egui::Context, ui_ms: f32) {
+        let Some(mut benchmark) = self.benchmark.take() else {
+            return;
+        };
+        ctx.request_repaint();
+        let ready = self.job.is_none() && self.workspace.is_some() && self.panel.is_idle();
+        if !ready {
+            if self.job.is_none() && self.workspace.is_none() && self.open_error.is_some() {
+                eprintln!("benchmark: nothing opened");
+                ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+                return;
+            }
+            self.benchmark = Some(benchmark);
+            return;
+        }
+        if benchmark.fit_leaves && !benchmark.fit_started {
+            benchmark.fit_started = true;
+            self.benchmark = Some(benchmark);
+            self.fit_leaves();
+            return;
+        }
+        if let Some(orbit) = self.view3d.orbit.as_mut() {
+            orbit.rotate(egui::vec2(4.0, 0.0));
+        }
+        if benchmark.warmup > 0 {
+            benchmark.warmup -= 1;
+            self.paint_times.clear();
+            self.benchmark = Some(benchmark);
+            return;
+        }
+        if let Some(&paint) = self.paint_times.back() {
+            benchmark.paint_ms.push(paint);
+            benchmark.ui_ms.push(ui_ms);
+        }
+        if benchmark.paint_ms.len() < benchmark.frames {
+            self.benchmark = Some(benchmark);
+            return;
+        }
+        let (points, leaves) = self.workspace.as_ref().map_or((0, 0), |w| {
+            (
+                w.session.segmentation().points.len(),
+                w.leaves.as_ref().map_or(0, |(_, l)| l.leaves.len()),
+            )
+        });
+        let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len().max(1) as f32;
+        let report = serde_json::json!({
+            "frames": benchmark.paint_ms.len(),
+            "points": points,
+            "textured_leaves": leaves,
+            "layout": format!("{:?}", self.layout),
+            "frame_ms": {
+                "mean": mean(&benchmark.paint_ms),
+                "median": percentile(&benchmark.paint_ms, 0.5),
+                "p95": percentile(&benchmark.paint_ms, 0.95),
+                "max": percentile(&benchmark.paint_ms, 1.0),
+            },
+            "ui_ms": {
+                "mean": mean(&benchmark.ui_ms),
+                "p95": percentile(&benchmark.ui_ms, 0.95),
+            },
+        });
+        let text = serde_json::to_string_pretty(&report).unwrap_or_default();
+        println!("{text}");
+        if let Some(out) = &benchmark.out
+            && let Err(e) = frond::util::atomic::write_atomic(out, text.as_bytes())
+        {
+            eprintln!("benchmark: could not write {}: {e}", out.display());
+        }
+        ctx.send_viewport_cmd(egui::ViewportCommand::Close);
     }
 
     /// Mean UI build time over the last frames (ms).
@@ -1031,13 +1201,15 @@ impl FrondApp {
             }
             ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {
                 if self.show_frame_time {
-                    ui.monospace(format!("UI {:.1} ms", self.mean_frame_ms()));
+                    ui.monospace(self.frame_time_text());
                 }
                 if let Some(workspace) = &self.workspace {
                     if workspace.is_dirty() {
                         ui.colored_label(ui.visuals().warn_fg_color, "• unsaved");
-                    } else {
+                    } else if workspace.project_path.is_some() {
                         ui.label("saved");
+                    } else {
+                        ui.weak("no edits");
                     }
                 }
             });
@@ -1075,19 +1247,39 @@ impl FrondApp {
             return;
         };
         ui.horizontal(|ui| {
+            for (layout, name) in [
+                (CentralLayout::Photo, "Photo"),
+                (CentralLayout::ThreeD, "3D"),
+                (CentralLayout::Both, "Photo + 3D"),
+            ] {
+                ui.selectable_value(&mut self.layout, layout, name);
+            }
+            ui.separator();
             ui.label(
                 RichText::new(format!("{}  {}", self.tool.icon(), self.tool.label())).strong(),
             );
             ui.label(RichText::new(self.tool.hint()).weak());
         });
-        let actions = self.panel.ui(ui, workspace, self.tool);
+        let mut actions = Vec::new();
+        match self.layout {
+            CentralLayout::Photo => actions = self.panel.ui(ui, workspace, self.tool),
+            CentralLayout::ThreeD => self.view3d.ui(ui, workspace, self.gpu),
+            CentralLayout::Both => {
+                let (panel, view3d, tool, gpu) =
+                    (&mut self.panel, &mut self.view3d, self.tool, self.gpu);
+                ui.columns(2, |columns| {
+                    actions = panel.ui(&mut columns[0], workspace, tool);
+                    view3d.ui(&mut columns[1], workspace, gpu);
+                });
+            }
+        }
         if self.show_frame_time {
             let points = workspace.session.segmentation().points.len();
             let rect = ui.min_rect();
             ui.painter().text(
                 rect.right_top() + egui::vec2(-10.0, 28.0),
                 egui::Align2::RIGHT_TOP,
-                format!("UI {:.1} ms · {points} points", self.mean_frame_ms()),
+                format!("{} · {points} points", self.frame_time_text()),
                 egui::FontId::monospace(12.0),
                 Color32::from_gray(200),
             );
@@ -1377,7 +1569,8 @@ fn scene_ui(ui: &mut egui::Ui, workspace: &Workspace, panel: &mut ImagePanel) {
 }
 
 impl eframe::App for FrondApp {
-    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+    fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
+        self.report_frame_time(frame.info().cpu_usage);
         self.window_ui(ui);
     }
 }

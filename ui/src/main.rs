@@ -12,8 +12,18 @@ use clap::Parser;
     about = "Frond's interactive plant modeling GUI"
 )]
 struct Args {
-    /// COLMAP project folder, dense/0 workspace or model folder to open.
+    /// COLMAP project folder, dense/0 workspace, model folder or .frond project to open.
     path: Option<PathBuf>,
+    /// Fit the leaves once the scene is open.
+    #[arg(long)]
+    fit_leaves: bool,
+    /// Benchmark: once open (and fitted with --fit-leaves), orbit the 3D view for this many
+    /// frames, print the frame times as JSON and quit.
+    #[arg(long, value_name = "FRAMES")]
+    benchmark_frames: Option<usize>,
+    /// Where the benchmark's JSON goes (also printed).
+    #[arg(long, value_name = "FILE", requires = "benchmark_frames")]
+    benchmark_out: Option<PathBuf>,
 }
 
 fn main() -> Result<()> {
@@ -33,7 +43,22 @@ fn main() -> Result<()> {
     eframe::run_native(
         "Frond",
         options,
-        Box::new(move |_cc| Ok(Box::new(frond_ui::FrondApp::new(args.path)))),
+        Box::new(move |cc| {
+            let mut app = frond_ui::FrondApp::new(args.path);
+            if let Some(frames) = args.benchmark_frames {
+                app.benchmark = Some(frond_ui::Benchmark::new(
+                    frames,
+                    args.fit_leaves,
+                    args.benchmark_out,
+                ));
+            } else if args.fit_leaves {
+                app.fit_leaves_when_open = true;
+            }
+            if let Some(render_state) = cc.wgpu_render_state.as_ref() {
+                app.install_gpu(render_state);
+            }
+            Ok(Box::new(app))
+        }),
     )
     .map_err(|e| anyhow::anyhow!("could not start the GUI: {e}"))
 }

@@ -44,7 +44,8 @@ pub enum OpenError {
 
 impl Workspace {
     fn with_session(session: Session, input: &Path, project_path: Option<PathBuf>) -> Self {
-        let saved_revision = project_path.as_ref().map(|_| 0);
+        // Nothing to lose yet: a fresh segmentation is re-created by opening the input again.
+        let saved_revision = Some(0);
         let scene = session.scene();
         let image_status = scene
             .reconstruction

@@ -404,17 +404,12 @@ fn branch_tools_edit_the_branch_tree_with_undo() {
         harness.state().status()
     );
 
-    // Drag the end's radius out to 6 px.
+    // Drag the end's radius out to 16 px.
     key(&mut harness, Key::R);
-    drag(
-        &mut harness,
-        &[
-            moved_tip,
-            [moved_tip[0] + 2.0, moved_tip[1]],
-            [moved_tip[0] + 4.0, moved_tip[1]],
-            [moved_tip[0] + 6.0, moved_tip[1]],
-        ],
-    );
+    let radius_stroke: Vec<[f64; 2]> = (0..=4)
+        .map(|k| [moved_tip[0] + 4.0 * k as f64, moved_tip[1]])
+        .collect();
+    drag(&mut harness, &radius_stroke);
     let widened = session(&harness).branches().get(drawn.id).unwrap().clone();
     assert_ne!(
         widened.cylinder.radius_end,

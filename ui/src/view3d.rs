@@ -1,0 +1,811 @@
+//! The 3D panel: the session's points (coloured by segment), fitted textured leaves, branches,
+//! control-point handles and camera frusta, drawn by the library's render core into its own
+//! targets and composited into the window's render pass through an `egui_wgpu` callback. An
+//! orbit camera turns about the plant: drag to orbit, right or middle drag to pan, scroll to
+//! zoom, double-click to frame the plant again.
+
+use std::sync::Arc;
+
+use eframe::egui_wgpu::{self, CallbackResources, CallbackTrait, RenderState};
+use eframe::wgpu;
+use egui::{Color32, Sense};
+use frond::branch::{CylinderMeshing, any_perpendicular};
+use frond::graph::foreground::PointClass;
+use frond::mesh::TriMesh;
+use frond::render::{GpuScene, Lighting, Renderer, TextureHandle, ViewCamera};
+use image::RgbaImage;
+use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+
+use crate::image_view::segment_color;
+use crate::workspace::Workspace;
+
+/// Side of the palette texture: colour `k` is texel `(k mod side, k div side)`.
+const PALETTE_SIDE: u32 = 64;
+/// Reserved palette entries (segments use the rest).
+const WOOD: u32 = 0;
+const HANDLE: u32 = 1;
+const FRUSTUM: u32 = 2;
+const UNASSIGNED: u32 = 3;
+const FIRST_SEGMENT: u32 = 4;
+/// Vertical field of view of the 3D panel.
+const FIELD_OF_VIEW_DEG: f64 = 45.0;
+/// Background (linear RGB).
+const BACKGROUND: [f64; 4] = [0.045, 0.05, 0.06, 1.0];
+
+/// An orbit camera about a target, with the plant's up direction.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Orbit {
+    pub target: Point3<f64>,
+    pub up: Vector3<f64>,
+    /// Azimuth and elevation (radians) of the eye seen from the target.
+    pub yaw: f64,
+    pub pitch: f64,
+    pub distance: f64,
+}
+
+impl Orbit {
+    /// Frames the plant's points (the foreground's plant class, else every point).
+    pub fn frame(workspace: &Workspace) -> Option<Self> {
+        let segmentation = workspace.session.segmentation();
+        let points = &segmentation.points.positions;
+        let plant: Vec<&Point3<f64>> = points
+            .iter()
+            .zip(&segmentation.foreground.class)
+            .filter(|(_, c)| **c == PointClass::Plant)
+            .map(|(p, _)| p)
+            .collect();
+        let chosen: Vec<&Point3<f64>> = if plant.len() >= 3 {
+            plant
+        } else {
+            points.iter().collect()
+        };
+        if chosen.is_empty() {
+            return None;
+        }
+        let n = chosen.len() as f64;
+        let target = Point3::from(chosen.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / n);
+        let mut distances: Vec<f64> = chosen.iter().map(|p| (*p - target).norm()).collect();
+        distances.sort_by(f64::total_cmp);
+        let radius = distances[(distances.len() - 1) * 95 / 100].max(1e-6);
+        let up = segmentation
+            .foreground
+            .up
+            .try_normalize(1e-12)
+            .unwrap_or(Vector3::z());
+        Some(Self {
+            target,
+            up,
+            yaw: 0.6,
+            pitch: 0.35,
+            distance: radius / (FIELD_OF_VIEW_DEG.to_radians() * 0.5).tan() * 1.3,
+        })
+    }
+
+    /// The eye position.
+    pub fn eye(&self) -> Point3<f64> {
+        let e1 = any_perpendicular(&self.up).normalize();
+        let e2 = self.up.cross(&e1);
+        let direction = (e1 * self.yaw.cos() + e2 * self.yaw.sin()) * self.pitch.cos()
+            + self.up * self.pitch.sin();
+        self.target + direction * self.distance
+    }
+
+    /// `camera_from_world` with COLMAP's axes (x right, y down, z forward).
+    pub fn camera_from_world(&self) -> Isometry3<f64> {
+        let eye = self.eye();
+        let z = (self.target - eye).normalize();
+        let up_across = self.up - z * self.up.dot(&z);
+        let y = -up_across
+            .try_normalize(1e-12)
+            .unwrap_or_else(|| any_perpendicular(&z));
+        let x = y.cross(&z);
+        let rotation = Rotation3::from_matrix_unchecked(Matrix3::from_rows(&[
+            x.transpose(),
+            y.transpose(),
+            z.transpose(),
+        ]));
+        let translation = -(rotation * eye.coords);
+        Isometry3::from_parts(
+            Translation3::from(translation),
+            UnitQuaternion::from_rotation_matrix(&rotation),
+        )
+    }
+
+    /// The render core's camera for a panel of `width` × `height` pixels.
+    pub fn view_camera(&self, width: u32, height: u32) -> ViewCamera {
+        // The field of view spans the panel's shorter side.
+        let focal = width.min(height) as f64 * 0.5 / (FIELD_OF_VIEW_DEG.to_radians() * 0.5).tan();
+        ViewCamera {
+            width,
+            height,
+            fx: focal,
+            fy: focal,
+            cx: width as f64 * 0.5,
+            cy: height as f64 * 0.5,
+            camera_from_world: self.camera_from_world(),
+            near: self.distance * 0.01,
+            far: self.distance * 20.0,
+        }
+    }
+
+    /// Orbits by screen deltas (points).
+    pub fn rotate(&mut self, delta: egui::Vec2) {
+        self.yaw -= delta.x as f64 * 0.008;
+        self.pitch = (self.pitch + delta.y as f64 * 0.008).clamp(-1.5, 1.5);
+    }
+
+    /// Pans the target by screen deltas (points) in a panel whose shorter side is `side`
+    /// points.
+    pub fn pan(&mut self, delta: egui::Vec2, side: f32) {
+        let camera = self.camera_from_world();
+        let rotation = camera.rotation.inverse();
+        let world_per_point =
+            2.0 * self.distance * (FIELD_OF_VIEW_DEG.to_radians() * 0.5).tan() / side as f64;
+        let right = rotation * Vector3::x();
+        let down = rotation * Vector3::y();
+        self.target -= (right * delta.x as f64 + down * delta.y as f64) * world_per_point;
+    }
+
+    pub fn zoom(&mut self, factor: f64) {
+        self.distance = (self.distance / factor).max(1e-6);
+    }
+}
+
+/// What the 3D panel draws, in the world frame, ready to upload.
+pub struct SceneData {
+    /// Changes whenever the content does (workspace revision and fit).
+    pub key: (u64, u64),
+    pub palette: RgbaImage,
+    /// Meshes drawn with the palette: points, branches, handles and frusta.
+    pub palette_meshes: Vec<TriMesh>,
+    /// Fitted leaves with their textures.
+    pub leaves: Vec<(TriMesh, RgbaImage)>,
+    pub points: usize,
+}
+
+fn palette_uv(index: u32) -> [f32; 2] {
+    let index = index % (PALETTE_SIDE * PALETTE_SIDE);
+    [
+        ((index % PALETTE_SIDE) as f32 + 0.5) / PALETTE_SIDE as f32,
+        ((index / PALETTE_SIDE) as f32 + 0.5) / PALETTE_SIDE as f32,
+    ]
+}
+
+/// An octahedron of radius `r` about `p`, coloured by palette entry `colour`.
+fn add_octahedron(mesh: &mut TriMesh, p: &Point3<f64>, r: f64, colour: u32) {
+    let base = mesh.positions.len() as u32;
+    let uv = palette_uv(colour);
+    for axis in [
+        Vector3::x(),
+        -Vector3::x(),
+        Vector3::y(),
+        -Vector3::y(),
+        Vector3::z(),
+        -Vector3::z(),
+    ] {
+        mesh.positions.push((p + axis * r).cast::<f32>());
+        mesh.normals.push(axis.cast::<f32>());
+        mesh.uvs.push(uv);
+    }
+    for (a, b, c) in [
+        (0, 2, 4),
+        (2, 1, 4),
+        (1, 3, 4),
+        (3, 0, 4),
+        (2, 0, 5),
+        (1, 2, 5),
+        (3, 1, 5),
+        (0, 3, 5),
+    ] {
+        mesh.triangles.push([base + a, base + b, base + c]);
+    }
+}
+
+/// A square bar of half-width `w` from `a` to `b`.
+fn add_bar(mesh: &mut TriMesh, a: &Point3<f64>, b: &Point3<f64>, w: f64, colour: u32) {
+    let axis = b - a;
+    if axis.norm() < 1e-12 {
+        return;
+    }
+    let u = any_perpendicular(&axis.normalize());
+    let v = axis.normalize().cross(&u);
+    let uv = palette_uv(colour);
+    for (side, normal) in [(u, v), (v, -u), (-u, -v), (-v, u)] {
+        let base = mesh.positions.len() as u32;
+        let offset_a = side * w + normal * w;
+        let offset_b = side * w - normal * w;
+        for p in [a + offset_a, a + offset_b, b + offset_b, b + offset_a] {
+            mesh.positions.push(p.cast::<f32>());
+            mesh.normals.push(side.cast::<f32>());
+            mesh.uvs.push(uv);
+        }
+        mesh.triangles.push([base, base + 1, base + 2]);
+        mesh.triangles.push([base, base + 2, base + 3]);
+    }
+}
+
+impl SceneData {
+    /// Builds the panel's content from the workspace.
+    pub fn build(workspace: &Workspace, extent: f64) -> Self {
+        let session = &workspace.session;
+        let segmentation = session.segmentation();
+        let mut palette = RgbaImage::new(PALETTE_SIDE, PALETTE_SIDE);
+        let mut set = |index: u32, colour: Color32| {
+            let index = index % (PALETTE_SIDE * PALETTE_SIDE);
+            palette.put_pixel(
+                index % PALETTE_SIDE,
+                index / PALETTE_SIDE,
+                image::Rgba([colour.r(), colour.g(), colour.b(), 255]),
+            );
+        };
+        set(WOOD, Color32::from_rgb(150, 105, 70));
+        set(HANDLE, Color32::from_rgb(255, 170, 60));
+        set(FRUSTUM, Color32::from_rgb(120, 170, 230));
+        set(UNASSIGNED, Color32::from_gray(110));
+        let segments = session.segments();
+        for (id, state) in segments.iter().enumerate() {
+            if let Some(state) = state {
+                set(
+                    FIRST_SEGMENT + id as u32,
+                    segment_color(id as i32, Some(state.label)),
+                );
+            }
+        }
+
+        // Points: small octahedra, background points left out.
+        let mut points = TriMesh::default();
+        let point_radius = extent * 0.0035;
+        let mut shown = 0;
+        for (p, (&segment, class)) in segmentation.points.positions.iter().zip(
+            session
+                .segment_of()
+                .iter()
+                .zip(&segmentation.foreground.class),
+        ) {
+            if *class == PointClass::Outlier || (segment < 0 && *class != PointClass::Plant) {
+                continue;
+            }
+            let colour = if segment >= 0 {
+                FIRST_SEGMENT + segment as u32
+            } else {
+                UNASSIGNED
+            };
+            add_octahedron(&mut points, p, point_radius, colour);
+            shown += 1;
+        }
+
+        // Branches and their control points.
+        let tree = session.branches();
+        let mut branches = tree.mesh(&CylinderMeshing::default());
+        let wood = palette_uv(WOOD);
+        for uv in &mut branches.uvs {
+            *uv = wood;
+        }
+        // Radius spheres at the branch ends (never smaller than a visible handle).
+        let mut handles = TriMesh::default();
+        for branch in &tree.branches {
+            let controls = branch.cylinder.skeleton.control_points();
+            let ends = [
+                (controls.first(), branch.cylinder.radius_start),
+                (controls.last(), branch.cylinder.radius_end),
+            ];
+            for (p, radius) in ends {
+                if let Some(p) = p {
+                    add_octahedron(&mut handles, p, (radius * 1.3).max(extent * 0.006), HANDLE);
+                }
+            }
+        }
+        // Camera frusta, a tenth of the plant's extent deep.
+        let model = &session.scene().reconstruction;
+        for image in model.images() {
+            let camera = model.camera_of(image);
+            let (fx, fy, cx, cy) = camera.focal_and_principal_point();
+            let world_from_camera = image.camera_from_world.inverse();
+            let depth = extent * 0.1;
+            let corner = |u: f64, v: f64| {
+                world_from_camera * Point3::new((u - cx) / fx * depth, (v - cy) / fy * depth, depth)
+            };
+            let (w, h) = (camera.width as f64, camera.height as f64);
+            let corners = [
+                corner(0.0, 0.0),
+                corner(w, 0.0),
+                corner(w, h),
+                corner(0.0, h),
+            ];
+            let centre = image.center_world();
+            let bar = extent * 0.0015;
+            for k in 0..4 {
+                add_bar(&mut handles, &centre, &corners[k], bar, FRUSTUM);
+                add_bar(
+                    &mut handles,
+                    &corners[k],
+                    &corners[(k + 1) % 4],
+                    bar,
+                    FRUSTUM,
+                );
+            }
+        }
+
+        let leaves = workspace
+            .leaves
+            .as_ref()
+            .map(|(_, leaves)| {
+                leaves
+                    .leaves
+                    .iter()
+                    .map(|l| (l.fit.mesh.clone(), l.fit.texture.clone()))
+                    .collect()
+            })
+            .unwrap_or_default();
+        Self {
+            key: (
+                workspace.revision,
+                workspace.leaves.as_ref().map_or(u64::MAX, |(r, _)| *r),
+            ),
+            palette,
+            palette_meshes: vec![points, branches, handles],
+            leaves,
+            points: shown,
+        }
+    }
+}
+
+/// GPU state of the 3D panel, kept in egui_wgpu's callback resources.
+pub struct View3dResources {
+    renderer: Renderer,
+    scene: Option<((u64, u64), GpuScene)>,
+    frame_key: Option<((u64, u64), [u64; 8])>,
+    blit_pipeline: wgpu::RenderPipeline,
+    blit_layout: wgpu::BindGroupLayout,
+    sampler: wgpu::Sampler,
+    blit_group: Option<wgpu::BindGroup>,
+    /// Seconds the CPU spent encoding the last re-rendered frame, and its triangles.
+    pub last_frame: (f64, usize),
+}
+
+const BLIT_SHADER: &str = r#"
+@group(0) @binding(0) var frame: texture_2d<f32>;
+@group(0) @binding(1) var frame_sampler: sampler;
+
+struct Varyings {
+    @builtin(position) position: vec4<f32>,
+    @location(0) uv: vec2<f32>,
+};
+
+@vertex
+fn vs_main(@builtin(vertex_index) index: u32) -> Varyings {
+    let uv = vec2<f32>(f32((index << 1u) & 2u), f32(index & 2u));
+    var out: Varyings;
+    out.position = vec4<f32>(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, 0.0, 1.0);
+    out.uv = uv;
+    return out;
+}
+
+// The frame is sampled as linear colour; a non-sRGB window target wants sRGB-encoded values.
+fn encode_srgb(c: vec3<f32>) -> vec3<f32> {
+    let low = c * 12.92;
+    let high = 1.055 * pow(c, vec3<f32>(1.0 / 2.4)) - 0.055;
+    return select(high, low, c <= vec3<f32>(0.0031308));
+}
+
+@fragment
+fn fs_srgb_target(in: Varyings) -> @location(0) vec4<f32> {
+    return vec4<f32>(textureSample(frame, frame_sampler, in.uv).rgb, 1.0);
+}
+
+@fragment
+fn fs_linear_target(in: Varyings) -> @location(0) vec4<f32> {
+    return vec4<f32>(encode_srgb(textureSample(frame, frame_sampler, in.uv).rgb), 1.0);
+}
+"#;
+
+impl View3dResources {
+    /// Puts the 3D panel's GPU state into eframe's renderer (once, at start-up).
+    pub fn install(render_state: &RenderState) -> Result<(), String> {
+        let device = &render_state.device;
+        let renderer = Renderer::with_device(
+            device.clone(),
+            render_state.queue.clone(),
+            render_state.adapter.get_info(),
+        )
+        .map_err(|e| e.to_string())?;
+        let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("3d panel blit"),
+            source: wgpu::ShaderSource::Wgsl(BLIT_SHADER.into()),
+        });
+        let blit_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("3d panel blit"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                    count: None,
+                },
+            ],
+        });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("3d panel blit"),
+            bind_group_layouts: &[Some(&blit_layout)],
+            immediate_size: 0,
+        });
+        let fragment_entry = if render_state.target_format.is_srgb() {
+            "fs_srgb_target"
+        } else {
+            "fs_linear_target"
+        };
+        let blit_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("3d panel blit"),
+            layout: Some(&layout),
+            vertex: wgpu::VertexState {
+                module: &shader,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            fragment: Some(wgpu::FragmentState {
+                module: &shader,
+                entry_point: Some(fragment_entry),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: render_state.target_format,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: None,
+            multisample: wgpu::MultisampleState::default(),
+            multiview_mask: None,
+            cache: None,
+        });
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("3d panel blit"),
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        });
+        render_state
+            .renderer
+            .write()
+            .callback_resources
+            .insert(Self {
+                renderer,
+                scene: None,
+                frame_key: None,
+                blit_pipeline,
+                blit_layout,
+                sampler,
+                blit_group: None,
+                last_frame: (0.0, 0),
+            });
+        Ok(())
+    }
+
+    fn upload(&mut self, data: &SceneData) -> Result<GpuScene, String> {
+        let renderer = &self.renderer;
+        let mut scene = renderer.new_scene();
+        let palette = renderer.add_texture(&mut scene, &data.palette);
+        for (k, mesh) in data.palette_meshes.iter().enumerate() {
+            if !mesh.triangles.is_empty() {
+                renderer
+                    .add_mesh(&mut scene, mesh, palette, k as u32 + 1, false)
+                    .map_err(|e| e.to_string())?;
+            }
+        }
+        for (k, (mesh, texture)) in data.leaves.iter().enumerate() {
+            let texture: TextureHandle = renderer.add_cutout_texture(&mut scene, texture);
+            renderer
+                .add_mesh(&mut scene, mesh, texture, 100 + k as u32, true)
+                .map_err(|e| e.to_string())?;
+        }
+        Ok(scene)
+    }
+}
+
+/// One frame's request to the GPU: what to draw and from where.
+struct View3dCallback {
+    data: Arc<SceneData>,
+    camera: ViewCamera,
+}
+
+fn camera_key(camera: &ViewCamera) -> [u64; 8] {
+    let q = camera.camera_from_world.rotation.coords;
+    let t = camera.camera_from_world.translation.vector;
+    [
+        ((camera.width as u64) << 32) | camera.height as u64,
+        camera.fx.to_bits(),
+        q.x.to_bits() ^ q.w.to_bits().rotate_left(17),
+        q.y.to_bits() ^ q.z.to_bits().rotate_left(29),
+        t.x.to_bits(),
+        t.y.to_bits(),
+        t.z.to_bits(),
+        camera.near.to_bits(),
+    ]
+}
+
+impl CallbackTrait for View3dCallback {
+    fn prepare(
+        &self,
+        device: &wgpu::Device,
+        _queue: &wgpu::Queue,
+        _screen_descriptor: &egui_wgpu::ScreenDescriptor,
+        egui_encoder: &mut wgpu::CommandEncoder,
+        resources: &mut CallbackResources,
+    ) -> Vec<wgpu::CommandBuffer> {
+        let Some(resources) = resources.get_mut::<View3dResources>() else {
+            return Vec::new();
+        };
+        if resources
+            .scene
+            .as_ref()
+            .is_none_or(|(key, _)| *key != self.data.key)
+        {
+            match resources.upload(&self.data) {
+                Ok(scene) => resources.scene = Some((self.data.key, scene)),
+                Err(e) => {
+                    tracing::warn!("3D panel: {e}");
+                    return Vec::new();
+                }
+            }
+            resources.frame_key = None;
+        }
+        let frame_key = (self.data.key, camera_key(&self.camera));
+        if resources.frame_key == Some(frame_key) {
+            return Vec::new();
+        }
+        let Some((_, scene)) = resources.scene.as_ref() else {
+            return Vec::new();
+        };
+        let clock = std::time::Instant::now();
+        match resources.renderer.encode_color_frame(
+            egui_encoder,
+            scene,
+            &self.camera,
+            &Lighting::default(),
+            BACKGROUND,
+        ) {
+            Ok((_, triangles)) => {
+                resources.last_frame = (clock.elapsed().as_secs_f64(), triangles);
+            }
+            Err(e) => {
+                tracing::warn!("3D panel: {e}");
+                return Vec::new();
+            }
+        }
+        if let Some(view) = resources.renderer.color_view() {
+            resources.blit_group = Some(device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("3d panel frame"),
+                layout: &resources.blit_layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: wgpu::BindingResource::TextureView(view),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: wgpu::BindingResource::Sampler(&resources.sampler),
+                    },
+                ],
+            }));
+        }
+        resources.frame_key = Some(frame_key);
+        Vec::new()
+    }
+
+    fn paint(
+        &self,
+        _info: egui::PaintCallbackInfo,
+        render_pass: &mut wgpu::RenderPass<'static>,
+        resources: &CallbackResources,
+    ) {
+        let Some(resources) = resources.get::<View3dResources>() else {
+            return;
+        };
+        let Some(group) = &resources.blit_group else {
+            return;
+        };
+        render_pass.set_pipeline(&resources.blit_pipeline);
+        render_pass.set_bind_group(0, group, &[]);
+        render_pass.draw(0..3, 0..1);
+    }
+}
+
+/// The 3D panel's state.
+#[derive(Default)]
+pub struct View3d {
+    pub orbit: Option<Orbit>,
+    data: Option<Arc<SceneData>>,
+    extent: f64,
+}
+
+impl View3d {
+    /// Forgets the previous workspace.
+    pub fn reset(&mut self) {
+        *self = Self::default();
+    }
+
+    /// The content drawn, rebuilt when the workspace changed.
+    pub fn data(&mut self, workspace: &Workspace) -> Arc<SceneData> {
+        let key = (
+            workspace.revision,
+            workspace.leaves.as_ref().map_or(u64::MAX, |(r, _)| *r),
+        );
+        if self.orbit.is_none() {
+            self.orbit = Orbit::frame(workspace);
+            self.extent = self.orbit.map_or(1.0, |o| {
+                o.distance * (FIELD_OF_VIEW_DEG.to_radians() * 0.5).tan()
+            });
+        }
+        match &self.data {
+            Some(data) if data.key == key => Arc::clone(data),
+            _ => {
+                let data = Arc::new(SceneData::build(workspace, self.extent));
+                self.data = Some(Arc::clone(&data));
+                data
+            }
+        }
+    }
+
+    /// Draws the panel; `gpu` says whether the render core is installed in the window.
+    pub fn ui(&mut self, ui: &mut egui::Ui, workspace: &Workspace, gpu: bool) {
+        let (rect, response) = ui.allocate_exact_size(ui.available_size(), Sense::click_and_drag());
+        let data = self.data(workspace);
+        let Some(orbit) = self.orbit.as_mut() else {
+            ui.painter().text(
+                rect.center(),
+                egui::Align2::CENTER_CENTER,
+                "no points to show",
+                egui::FontId::proportional(14.0),
+                Color32::from_gray(160),
+            );
+            return;
+        };
+        if response.dragged_by(egui::PointerButton::Primary) {
+            orbit.rotate(response.drag_delta());
+        }
+        if response.dragged_by(egui::PointerButton::Secondary)
+            || response.dragged_by(egui::PointerButton::Middle)
+        {
+            orbit.pan(response.drag_delta(), rect.width().min(rect.height()));
+        }
+        if response.hovered() {
+            let (scroll, pinch) = ui.input(|i| (i.smooth_scroll_delta.y, i.zoom_delta()));
+            let factor = (scroll as f64 * 0.002).exp() * pinch as f64;
+            if (factor - 1.0).abs() > 1e-6 {
+                orbit.zoom(factor);
+            }
+        }
+        if response.double_clicked() {
+            self.orbit = Orbit::frame(workspace);
+        }
+        let Some(orbit) = self.orbit else {
+            return;
+        };
+        let painter = ui.painter_at(rect);
+        let pixels_per_point = ui.ctx().pixels_per_point();
+        let width = (rect.width() * pixels_per_point).round().max(1.0) as u32;
+        let height = (rect.height() * pixels_per_point).round().max(1.0) as u32;
+        if gpu {
+            painter.add(egui_wgpu::Callback::new_paint_callback(
+                rect,
+                View3dCallback {
+                    data: Arc::clone(&data),
+                    camera: orbit.view_camera(width, height),
+                },
+            ));
+        } else {
+            painter.rect_filled(rect, 0.0, Color32::from_gray(18));
+            painter.text(
+                rect.center(),
+                egui::Align2::CENTER_CENTER,
+                "The 3D view needs the GPU renderer (run frond-ui in a window).",
+                egui::FontId::proportional(14.0),
+                Color32::from_gray(160),
+            );
+        }
+        painter.text(
+            rect.left_bottom() + egui::vec2(10.0, -10.0),
+            egui::Align2::LEFT_BOTTOM,
+            format!(
+                "3D · {} points · {} leaves · {} branches",
+                data.points,
+                data.leaves.len(),
+                workspace.session.branches().branches.len()
+            ),
+            egui::FontId::proportional(13.0),
+            Color32::from_gray(220),
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn orbit() -> Orbit {
+        Orbit {
+            target: Point3::new(1.0, 2.0, 3.0),
+            up: Vector3::z(),
+            yaw: 0.3,
+            pitch: 0.4,
+            distance: 2.0,
+        }
+    }
+
+    #[test]
+    fn the_orbit_camera_looks_at_its_target_with_up_on_screen_up() {
+        let orbit = orbit();
+        let camera = orbit.view_camera(640, 480);
+        let (uv, depth) = camera.project(&orbit.target).unwrap();
+        assert!(
+            (uv.x - 320.0).abs() < 1e-6 && (uv.y - 240.0).abs() < 1e-6,
+            "{uv:?}"
+        );
+        assert!((depth - 2.0).abs() < 1e-9);
+        // A point above the target projects above the centre (smaller v).
+        let (above, _) = camera
+            .project(&(orbit.target + Vector3::z() * 0.1))
+            .unwrap();
+        assert!(
+            above.y < 240.0 && (above.x - 320.0).abs() < 1e-6,
+            "{above:?}"
+        );
+        assert!((orbit.eye() - orbit.target).norm() - 2.0 < 1e-12);
+    }
+
+    #[test]
+    fn panning_moves_the_target_across_the_view_and_zoom_keeps_it() {
+        let mut orbit = orbit();
+        let before = orbit.view_camera(640, 480);
+        orbit.pan(egui::vec2(10.0, 0.0), 480.0);
+        // The old target now appears 10 points to the right of the centre.
+        let (uv, _) = orbit
+            .view_camera(640, 480)
+            .project(&Point3::new(1.0, 2.0, 3.0))
+            .unwrap();
+        assert!(
+            (uv.x - 330.0).abs() < 1e-6 && (uv.y - 240.0).abs() < 1e-6,
+            "{uv:?}"
+        );
+        orbit.zoom(2.0);
+        assert!((orbit.distance - 1.0).abs() < 1e-12);
+        assert_ne!(before, orbit.view_camera(640, 480));
+    }
+
+    #[test]
+    fn octahedra_and_bars_are_closed_and_use_their_palette_texel() {
+        let mut mesh = TriMesh::default();
+        add_octahedron(&mut mesh, &Point3::origin(), 1.0, 5);
+        add_bar(
+            &mut mesh,
+            &Point3::origin(),
+            &Point3::new(0.0, 0.0, 1.0),
+            0.1,
+            7,
+        );
+        assert_eq!(mesh.positions.len(), 6 + 16);
+        assert_eq!(mesh.triangles.len(), 8 + 8);
+        assert_eq!(mesh.uvs[0], palette_uv(5));
+        assert_eq!(mesh.uvs[6], palette_uv(7));
+        assert_ne!(palette_uv(5), palette_uv(7));
+        // Every octahedron edge is shared by exactly two triangles.
+        let mut edges = std::collections::HashMap::new();
+        for t in &mesh.triangles[..8] {
+            for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+                *edges.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+            }
+        }
+        assert!(edges.values().all(|&n| n == 2));
+    }
+}
