@@ -194,6 +194,8 @@ struct GpuMesh {
     bind_group: wgpu::BindGroup,
     /// Drawn once, untransformed, by every render (else only through instance batches).
     is_static: bool,
+    /// Static meshes can be hidden (progressive drawing while a view moves).
+    visible: bool,
 }
 
 /// Meshes and textures on the GPU, ready to render from any view.
@@ -211,6 +213,13 @@ impl GpuScene {
     pub fn num_triangles(&self) -> usize {
         self.triangles
     }
+    /// Shows or hides a static mesh in later renders (all are shown when uploaded).
+    pub fn set_visible(&mut self, mesh: MeshHandle, visible: bool) {
+        if let Some(m) = self.meshes.get_mut(mesh.0) {
+            m.visible = visible;
+        }
+    }
+
     /// Triangles of one mesh.
     pub fn mesh_triangles(&self, mesh: MeshHandle) -> usize {
         self.meshes
@@ -790,6 +799,7 @@ impl Renderer {
             index_count: (mesh.triangles.len() * 3) as u32,
             bind_group,
             is_static,
+            visible: true,
         });
         Ok(MeshHandle(scene.meshes.len() - 1))
     }
@@ -1235,7 +1245,7 @@ fn draw_meshes(
     pass.set_bind_group(0, view_group, &[]);
     pass.set_vertex_buffer(1, identity_instance.slice(..));
     let mut draws = (0, 0);
-    for mesh in scene.meshes.iter().filter(|m| m.is_static) {
+    for mesh in scene.meshes.iter().filter(|m| m.is_static && m.visible) {
         let Some((vertices, indices)) = &mesh.buffers else {
             continue;
         };
@@ -1372,6 +1382,45 @@ mod tests {
         }
         assert!(covered > 500, "square too small: {covered} pixels");
         assert_eq!(disagreements, 0, "rasterizer and projection disagree");
+    }
+
+    #[test]
+    fn hidden_meshes_are_not_drawn_until_shown_again() {
+        let mut renderer = renderer();
+        let mut scene = renderer.new_scene();
+        let white = RgbaImage::from_pixel(4, 4, image::Rgba([255, 255, 255, 255]));
+        let texture = renderer.add_texture(&mut scene, &white);
+        let left = renderer
+            .add_mesh(
+                &mut scene,
+                &square_at(Point3::new(-0.3, 0.0, 0.0), 0.2),
+                texture,
+                3,
+                false,
+            )
+            .unwrap();
+        renderer
+            .add_mesh(
+                &mut scene,
+                &square_at(Point3::new(0.3, 0.0, 0.0), 0.2),
+                texture,
+                4,
+                false,
+            )
+            .unwrap();
+        let view = camera(160, 120);
+        let ids = |renderer: &mut Renderer, scene: &GpuScene| {
+            let out = renderer.render(scene, &view, &Lighting::default()).unwrap();
+            let mut ids: Vec<u32> = out.object_id.into_iter().filter(|&i| i != 0).collect();
+            ids.sort_unstable();
+            ids.dedup();
+            ids
+        };
+        assert_eq!(ids(&mut renderer, &scene), [3, 4]);
+        scene.set_visible(left, false);
+        assert_eq!(ids(&mut renderer, &scene), [4]);
+        scene.set_visible(left, true);
+        assert_eq!(ids(&mut renderer, &scene), [3, 4]);
     }
 
     #[test]

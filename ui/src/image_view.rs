@@ -193,6 +193,19 @@ pub struct ImagePanel {
     drag: Option<BranchDrag>,
     /// The transform of the last frame drawn.
     pub transform: Option<ViewTransform>,
+    /// The points overlay, rasterised on the CPU into one texture (far cheaper to draw than
+    /// a quad per point), and what it was drawn for.
+    points_overlay: Option<(PointsOverlayKey, TextureHandle)>,
+}
+
+/// What the points overlay depends on.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct PointsOverlayKey {
+    view: usize,
+    revision: u64,
+    size: [usize; 2],
+    center: [u32; 2],
+    zoom: u32,
 }
 
 impl Default for ImagePanel {
@@ -215,6 +228,7 @@ impl Default for ImagePanel {
             merge_first: None,
             drag: None,
             transform: None,
+            points_overlay: None,
         }
     }
 }
@@ -231,6 +245,38 @@ pub fn segment_color(segment: i32, label: Option<SegmentLabel>) -> Color32 {
         Some(SegmentLabel::Pot) => Color32::from_rgb(120, 120, 150),
         Some(SegmentLabel::Other) => Color32::from_gray(150),
     }
+}
+
+/// Splats projected points as squares (about 2.4·√zoom screen points wide, 2–7) into a
+/// transparent image covering the panel, `pixels_per_point` texels per point; later points
+/// overwrite earlier ones.
+fn rasterize_points(
+    projections: &[(u32, [f32; 2])],
+    transform: &ViewTransform,
+    size: [usize; 2],
+    pixels_per_point: f32,
+    color_of: impl Fn(u32) -> Color32,
+) -> ColorImage {
+    let [width, height] = size;
+    let mut pixels = vec![Color32::TRANSPARENT; width * height];
+    let half = ((1.2 * transform.zoom.sqrt()).clamp(1.0, 3.5) * pixels_per_point).round() as i64;
+    let (w, h) = (width as i64, height as i64);
+    for &(point, uv) in projections {
+        let p = (transform.screen_from_image([uv[0] as f64, uv[1] as f64]) - transform.rect.min)
+            * pixels_per_point;
+        let (x, y) = (p.x.floor() as i64, p.y.floor() as i64);
+        if x < -half || y < -half || x >= w + half || y >= h + half {
+            continue;
+        }
+        let color = color_of(point);
+        for yy in (y - half + 1).max(0)..(y + half).min(h) {
+            let row = yy as usize * width;
+            for xx in (x - half + 1).max(0)..(x + half).min(w) {
+                pixels[row + xx as usize] = color;
+            }
+        }
+    }
+    ColorImage::new(size, pixels)
 }
 
 /// A thin quad from `a` to `b` added to a mesh (cheaper than tessellated lines by the 100k).
@@ -647,18 +693,36 @@ impl ImagePanel {
         if self.overlays.points
             && let Some(projections) = &projections
         {
-            let half = (1.2 * self.zoom.sqrt()).clamp(1.0, 3.5);
-            let mut mesh = egui::Mesh::default();
-            for &(point, uv) in projections.iter() {
-                let p = transform.screen_from_image([uv[0] as f64, uv[1] as f64]);
-                if !visible.contains(p) {
-                    continue;
-                }
-                let segment = segment_of[point as usize];
-                let color = segment_color(segment, label_of(segment));
-                mesh.add_colored_rect(Rect::from_center_size(p, Vec2::splat(2.0 * half)), color);
+            let pixels_per_point = ui.ctx().pixels_per_point();
+            let key = PointsOverlayKey {
+                view,
+                revision: workspace.revision,
+                size: [
+                    (rect.width() * pixels_per_point).round().max(1.0) as usize,
+                    (rect.height() * pixels_per_point).round().max(1.0) as usize,
+                ],
+                center: [self.center.x.to_bits(), self.center.y.to_bits()],
+                zoom: self.zoom.to_bits(),
+            };
+            if self.points_overlay.as_ref().is_none_or(|(k, _)| *k != key) {
+                let image = rasterize_points(
+                    projections,
+                    &transform,
+                    key.size,
+                    pixels_per_point,
+                    |point| {
+                        let segment = segment_of[point as usize];
+                        segment_color(segment, label_of(segment))
+                    },
+                );
+                let texture =
+                    ui.ctx()
+                        .load_texture("points_overlay", image, egui::TextureOptions::NEAREST);
+                self.points_overlay = Some((key, texture));
             }
-            painter.add(Shape::mesh(mesh));
+            if let Some((_, texture)) = &self.points_overlay {
+                painter.image(texture.id(), rect, full_uv, Color32::WHITE);
+            }
         }
         if self.overlays.boundaries {
             for (segment, state) in segments.iter().enumerate() {
@@ -1120,6 +1184,34 @@ mod tests {
             transform.screen_from_image([320.0, 240.0]),
             pos2(500.0, 350.0)
         );
+    }
+
+    #[test]
+    fn points_are_splatted_where_they_project() {
+        let transform = ViewTransform {
+            rect: Rect::from_min_size(pos2(50.0, 20.0), vec2(100.0, 80.0)),
+            center: vec2(50.0, 40.0),
+            zoom: 1.0,
+        };
+        let projections = [
+            (0u32, [10.5f32, 20.5]),
+            (1, [90.0, 70.0]),
+            (2, [500.0, 10.0]),
+        ];
+        let image = rasterize_points(&projections, &transform, [200, 160], 2.0, |p| {
+            [Color32::RED, Color32::GREEN, Color32::BLUE][p as usize]
+        });
+        // Image pixel (10.5, 20.5) is screen (60.5, 40.5), texel (21, 41) at 2 px per point.
+        assert_eq!(image.pixels[41 * 200 + 21], Color32::RED);
+        assert_eq!(image.pixels[140 * 200 + 180], Color32::GREEN);
+        // Off-panel points leave nothing; most of the image stays transparent.
+        assert!(!image.pixels.contains(&Color32::BLUE));
+        let covered = image
+            .pixels
+            .iter()
+            .filter(|c| **c != Color32::TRANSPARENT)
+            .count();
+        assert!(covered > 0 && covered <= 2 * 4 * 4, "{covered}");
     }
 
     #[test]

@@ -60,6 +60,8 @@ pub struct Benchmark {
     /// Whole-frame CPU times (ms) as eframe reports them, and UI build times (ms).
     paint_ms: Vec<f32>,
     ui_ms: Vec<f32>,
+    /// Wall time between frames (ms), vsync waits included.
+    interval_ms: Vec<f32>,
     warmup: usize,
 }
 
@@ -728,6 +730,9 @@ impl FrondApp {
         if let Some(&paint) = self.paint_times.back() {
             benchmark.paint_ms.push(paint);
             benchmark.ui_ms.push(ui_ms);
+            benchmark
+                .interval_ms
+                .push(ctx.input(|i| i.unstable_dt) * 1000.0);
         }
         if benchmark.paint_ms.len() < benchmark.frames {
             self.benchmark = Some(benchmark);
@@ -754,6 +759,11 @@ impl FrondApp {
             "ui_ms": {
                 "mean": mean(&benchmark.ui_ms),
                 "p95": percentile(&benchmark.ui_ms, 0.95),
+            },
+            "interval_ms": {
+                "mean": mean(&benchmark.interval_ms),
+                "median": percentile(&benchmark.interval_ms, 0.5),
+                "p95": percentile(&benchmark.interval_ms, 0.95),
             },
         });
         let text = serde_json::to_string_pretty(&report).unwrap_or_default();

@@ -21,6 +21,9 @@ struct Args {
     /// frames, print the frame times as JSON and quit.
     #[arg(long, value_name = "FRAMES")]
     benchmark_frames: Option<usize>,
+    /// What the central area shows: photo, 3d or both.
+    #[arg(long, value_name = "LAYOUT", default_value = "both")]
+    layout: String,
     /// Where the benchmark's JSON goes (also printed).
     #[arg(long, value_name = "FILE", requires = "benchmark_frames")]
     benchmark_out: Option<PathBuf>,
@@ -28,6 +31,12 @@ struct Args {
 
 fn main() -> Result<()> {
     let args = Args::parse();
+    let layout = match args.layout.as_str() {
+        "photo" => frond_ui::CentralLayout::Photo,
+        "3d" => frond_ui::CentralLayout::ThreeD,
+        "both" => frond_ui::CentralLayout::Both,
+        other => anyhow::bail!("--layout {other}: expected photo, 3d or both"),
+    };
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
@@ -45,6 +54,7 @@ fn main() -> Result<()> {
         options,
         Box::new(move |cc| {
             let mut app = frond_ui::FrondApp::new(args.path);
+            app.layout = layout;
             if let Some(frames) = args.benchmark_frames {
                 app.benchmark = Some(frond_ui::Benchmark::new(
                     frames,

@@ -12,7 +12,7 @@ use egui::{Color32, Sense};
 use frond::branch::{CylinderMeshing, any_perpendicular};
 use frond::graph::foreground::PointClass;
 use frond::mesh::TriMesh;
-use frond::render::{GpuScene, Lighting, Renderer, TextureHandle, ViewCamera};
+use frond::render::{GpuScene, Lighting, MeshHandle, Renderer, TextureHandle, ViewCamera};
 use image::RgbaImage;
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
@@ -27,6 +27,10 @@ const HANDLE: u32 = 1;
 const FRUSTUM: u32 = 2;
 const UNASSIGNED: u32 = 3;
 const FIRST_SEGMENT: u32 = 4;
+/// Index of the detail points among the palette meshes.
+const DETAIL_POINTS: usize = 1;
+/// The view counts as moving for this long after its camera last changed (seconds).
+const SETTLE_SECONDS: f64 = 0.25;
 /// Vertical field of view of the 3D panel.
 const FIELD_OF_VIEW_DEG: f64 = 45.0;
 /// Background (linear RGB).
@@ -156,7 +160,8 @@ pub struct SceneData {
     /// Changes whenever the content does (workspace revision and fit).
     pub key: (u64, u64),
     pub palette: RgbaImage,
-    /// Meshes drawn with the palette: points, branches, handles and frusta.
+    /// Meshes drawn with the palette: points drawn while moving, the other points, branches,
+    /// and handles with frusta.
     pub palette_meshes: Vec<TriMesh>,
     /// Fitted leaves with their textures.
     pub leaves: Vec<(TriMesh, RgbaImage)>,
@@ -252,16 +257,24 @@ impl SceneData {
             }
         }
 
-        // Points: small octahedra, background points left out.
+        // Points: small octahedra, background points left out. A fixed quarter of them (by a
+        // hash of the index) is drawn while the view moves, the rest only once it stops.
         let mut points = TriMesh::default();
+        let mut detail = TriMesh::default();
         let point_radius = extent * 0.0035;
         let mut shown = 0;
-        for (p, (&segment, class)) in segmentation.points.positions.iter().zip(
-            session
-                .segment_of()
-                .iter()
-                .zip(&segmentation.foreground.class),
-        ) {
+        for (index, (p, (&segment, class))) in segmentation
+            .points
+            .positions
+            .iter()
+            .zip(
+                session
+                    .segment_of()
+                    .iter()
+                    .zip(&segmentation.foreground.class),
+            )
+            .enumerate()
+        {
             if *class == PointClass::Outlier || (segment < 0 && *class != PointClass::Plant) {
                 continue;
             }
@@ -270,7 +283,13 @@ impl SceneData {
             } else {
                 UNASSIGNED
             };
-            add_octahedron(&mut points, p, point_radius, colour);
+            let coarse = (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 62 == 0;
+            add_octahedron(
+                if coarse { &mut points } else { &mut detail },
+                p,
+                point_radius,
+                colour,
+            );
             shown += 1;
         }
 
@@ -343,7 +362,7 @@ impl SceneData {
                 workspace.leaves.as_ref().map_or(u64::MAX, |(r, _)| *r),
             ),
             palette,
-            palette_meshes: vec![points, branches, handles],
+            palette_meshes: vec![points, detail, branches, handles],
             leaves,
             points: shown,
         }
@@ -353,8 +372,9 @@ impl SceneData {
 /// GPU state of the 3D panel, kept in egui_wgpu's callback resources.
 pub struct View3dResources {
     renderer: Renderer,
-    scene: Option<((u64, u64), GpuScene)>,
-    frame_key: Option<((u64, u64), [u64; 8])>,
+    /// The uploaded scene and its mesh of detail points.
+    scene: Option<((u64, u64), GpuScene, Option<MeshHandle>)>,
+    frame_key: Option<((u64, u64), [u64; 8], bool)>,
     blit_pipeline: wgpu::RenderPipeline,
     blit_layout: wgpu::BindGroupLayout,
     sampler: wgpu::Sampler,
@@ -492,15 +512,19 @@ impl View3dResources {
         Ok(())
     }
 
-    fn upload(&mut self, data: &SceneData) -> Result<GpuScene, String> {
+    fn upload(&mut self, data: &SceneData) -> Result<(GpuScene, Option<MeshHandle>), String> {
         let renderer = &self.renderer;
         let mut scene = renderer.new_scene();
         let palette = renderer.add_texture(&mut scene, &data.palette);
+        let mut detail = None;
         for (k, mesh) in data.palette_meshes.iter().enumerate() {
             if !mesh.triangles.is_empty() {
-                renderer
+                let handle = renderer
                     .add_mesh(&mut scene, mesh, palette, k as u32 + 1, false)
                     .map_err(|e| e.to_string())?;
+                if k == DETAIL_POINTS {
+                    detail = Some(handle);
+                }
             }
         }
         for (k, (mesh, texture)) in data.leaves.iter().enumerate() {
@@ -509,7 +533,7 @@ impl View3dResources {
                 .add_mesh(&mut scene, mesh, texture, 100 + k as u32, true)
                 .map_err(|e| e.to_string())?;
         }
-        Ok(scene)
+        Ok((scene, detail))
     }
 }
 
@@ -517,6 +541,8 @@ impl View3dResources {
 struct View3dCallback {
     data: Arc<SceneData>,
     camera: ViewCamera,
+    /// Draw only the coarse points (the view is moving).
+    moving: bool,
 }
 
 fn camera_key(camera: &ViewCamera) -> [u64; 8] {
@@ -549,10 +575,10 @@ impl CallbackTrait for View3dCallback {
         if resources
             .scene
             .as_ref()
-            .is_none_or(|(key, _)| *key != self.data.key)
+            .is_none_or(|(key, _, _)| *key != self.data.key)
         {
             match resources.upload(&self.data) {
-                Ok(scene) => resources.scene = Some((self.data.key, scene)),
+                Ok((scene, detail)) => resources.scene = Some((self.data.key, scene, detail)),
                 Err(e) => {
                     tracing::warn!("3D panel: {e}");
                     return Vec::new();
@@ -560,13 +586,17 @@ impl CallbackTrait for View3dCallback {
             }
             resources.frame_key = None;
         }
-        let frame_key = (self.data.key, camera_key(&self.camera));
+        let frame_key = (self.data.key, camera_key(&self.camera), self.moving);
         if resources.frame_key == Some(frame_key) {
             return Vec::new();
         }
-        let Some((_, scene)) = resources.scene.as_ref() else {
+        let Some((_, scene, detail)) = resources.scene.as_mut() else {
             return Vec::new();
         };
+        if let Some(detail) = detail {
+            scene.set_visible(*detail, !self.moving);
+        }
+        let scene = &*scene;
         let clock = std::time::Instant::now();
         match resources.renderer.encode_color_frame(
             egui_encoder,
@@ -627,6 +657,9 @@ pub struct View3d {
     pub orbit: Option<Orbit>,
     data: Option<Arc<SceneData>>,
     extent: f64,
+    /// The camera of the last frame and when it last changed.
+    last_orbit: Option<Orbit>,
+    moved_at: Option<std::time::Instant>,
 }
 
 impl View3d {
@@ -692,6 +725,20 @@ impl View3d {
         let Some(orbit) = self.orbit else {
             return;
         };
+        if self.last_orbit != Some(orbit) {
+            if self.last_orbit.is_some() {
+                self.moved_at = Some(std::time::Instant::now());
+            }
+            self.last_orbit = Some(orbit);
+        }
+        let moving = self
+            .moved_at
+            .is_some_and(|t| t.elapsed().as_secs_f64() < SETTLE_SECONDS);
+        if moving {
+            // Draw the full detail once the view has settled.
+            ui.ctx()
+                .request_repaint_after(std::time::Duration::from_secs_f64(SETTLE_SECONDS));
+        }
         let painter = ui.painter_at(rect);
         let pixels_per_point = ui.ctx().pixels_per_point();
         let width = (rect.width() * pixels_per_point).round().max(1.0) as u32;
@@ -702,6 +749,7 @@ impl View3d {
                 View3dCallback {
                     data: Arc::clone(&data),
                     camera: orbit.view_camera(width, height),
+                    moving,
                 },
             ));
         } else {

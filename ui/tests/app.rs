@@ -537,8 +537,40 @@ fn fitting_runs_off_thread_can_be_cancelled_and_exports() {
     ] {
         assert!(folder.join(file).is_file(), "{file} missing: {status:?}");
     }
-    // The fitted leaves' outlines are drawn; the side panel reports the fit.
+    // The side panel reports the fit.
     harness.get_by_label_contains(&format!("{fitted} leaves fitted"));
+
+    // The 3D panel's content: every fitted leaf textured, the branches, a radius sphere per
+    // branch end and a frustum per photo.
+    let data = frond_ui::view3d::SceneData::build(workspace, 0.3);
+    assert_eq!(data.leaves.len(), fitted);
+    assert!(
+        data.leaves
+            .iter()
+            .all(|(mesh, texture)| { !mesh.triangles.is_empty() && texture.width() > 0 })
+    );
+    let [coarse, detail, branches, handles] = &data.palette_meshes[..] else {
+        panic!("four palette meshes expected");
+    };
+    assert_eq!(
+        coarse.positions.len() + detail.positions.len(),
+        6 * data.points
+    );
+    // About a quarter of the points are drawn while the view moves.
+    let share = coarse.positions.len() as f64 / (6 * data.points) as f64;
+    assert!((0.2..0.3).contains(&share), "{share}");
+    assert!(data.points > 1000, "{} points", data.points);
+    assert!(!branches.triangles.is_empty());
+    let ends = 2 * workspace.session.branches().branches.len();
+    let photos = workspace.session.scene().reconstruction.images().len();
+    // Octahedra (8 triangles) at the ends, 8 bars (8 triangles) per frustum.
+    assert_eq!(handles.triangles.len(), 8 * ends + 64 * photos);
+    assert!(
+        handles
+            .positions
+            .iter()
+            .all(|p| p.coords.iter().all(|v| v.is_finite()))
+    );
 }
 
 #[test]
