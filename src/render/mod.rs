@@ -279,6 +279,8 @@ struct Targets {
     color_msaa: wgpu::TextureView,
     color_resolved: wgpu::Texture,
     color_resolved_view: wgpu::TextureView,
+    /// The same texels seen as plain `Rgba8Unorm` (sRGB-encoded bytes, no decoding).
+    color_resolved_encoded_view: wgpu::TextureView,
     depth_msaa: wgpu::TextureView,
     id: wgpu::Texture,
     linear_depth: wgpu::Texture,
@@ -818,6 +820,7 @@ impl Renderer {
             depth_or_array_layers: 1,
         };
         let texture = |label: &str, format, samples, usage| {
+            let encoded = [wgpu::TextureFormat::Rgba8Unorm];
             self.device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(label),
                 size,
@@ -826,7 +829,11 @@ impl Renderer {
                 dimension: wgpu::TextureDimension::D2,
                 format,
                 usage,
-                view_formats: &[],
+                view_formats: if format == COLOR_FORMAT && samples == 1 {
+                    &encoded
+                } else {
+                    &[]
+                },
             })
         };
         let attachment = wgpu::TextureUsages::RENDER_ATTACHMENT;
@@ -846,6 +853,10 @@ impl Renderer {
             height,
             color_msaa: view(&color_msaa),
             color_resolved_view: view(&color_resolved),
+            color_resolved_encoded_view: color_resolved.create_view(&wgpu::TextureViewDescriptor {
+                format: Some(wgpu::TextureFormat::Rgba8Unorm),
+                ..Default::default()
+            }),
             color_resolved,
             depth_msaa: view(&depth_msaa),
             id: texture("object id", wgpu::TextureFormat::R32Uint, 1, readable),
@@ -1090,9 +1101,17 @@ impl Renderer {
         ))
     }
 
-    /// The resolved colour of the last frame (sRGB, single-sampled, bindable as a texture).
-    pub fn color_view(&self) -> Option<&wgpu::TextureView> {
-        self.targets.as_ref().map(|t| &t.color_resolved_view)
+    /// The resolved colour of the last frame (single-sampled, bindable as a texture): as
+    /// `Rgba8UnormSrgb` (sampling decodes to linear) or, with `encoded`, as `Rgba8Unorm`
+    /// (sampling returns the sRGB-encoded values, what a non-sRGB window target wants).
+    pub fn color_view(&self, encoded: bool) -> Option<&wgpu::TextureView> {
+        self.targets.as_ref().map(|t| {
+            if encoded {
+                &t.color_resolved_encoded_view
+            } else {
+                &t.color_resolved_view
+            }
+        })
     }
 
     /// Renders `scene` from `camera`: colour, depth and object ids.

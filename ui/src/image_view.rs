@@ -102,7 +102,8 @@ impl ViewTransform {
 
 enum Loadable {
     Loading(Receiver<Result<ColorImage, String>>),
-    Ready(TextureHandle),
+    /// The texture, and its pixels for compositing on the CPU.
+    Ready(TextureHandle, Arc<ColorImage>),
     Failed(String),
 }
 
@@ -193,8 +194,9 @@ pub struct ImagePanel {
     drag: Option<BranchDrag>,
     /// The transform of the last frame drawn.
     pub transform: Option<ViewTransform>,
-    /// The points overlay, rasterised on the CPU into one texture (far cheaper to draw than
-    /// a quad per point), and what it was drawn for.
+    /// The photo as seen at the current zoom and pan with the points splatted on it, composed
+    /// on the CPU into one panel-sized texture (a quad per point, or two full layers, cost far
+    /// more on a software rasteriser), and what it was composed for.
     points_overlay: Option<(PointsOverlayKey, TextureHandle)>,
 }
 
@@ -206,6 +208,8 @@ struct PointsOverlayKey {
     size: [usize; 2],
     center: [u32; 2],
     zoom: u32,
+    photo: bool,
+    points: bool,
 }
 
 impl Default for ImagePanel {
@@ -247,18 +251,69 @@ pub fn segment_color(segment: i32, label: Option<SegmentLabel>) -> Color32 {
     }
 }
 
-/// Splats projected points as squares (about 2.4·√zoom screen points wide, 2–7) into a
-/// transparent image covering the panel, `pixels_per_point` texels per point; later points
-/// overwrite earlier ones.
-fn rasterize_points(
-    projections: &[(u32, [f32; 2])],
+/// The photo (covering `image_size` camera pixels) resampled bilinearly into a panel-sized
+/// image of `size` texels, `pixels_per_point` per screen point; transparent off the photo.
+fn resample_photo(
+    photo: &ColorImage,
+    image_size: Vec2,
     transform: &ViewTransform,
     size: [usize; 2],
     pixels_per_point: f32,
-    color_of: impl Fn(u32) -> Color32,
 ) -> ColorImage {
     let [width, height] = size;
+    let [pw, ph] = photo.size;
     let mut pixels = vec![Color32::TRANSPARENT; width * height];
+    if pw == 0 || ph == 0 {
+        return ColorImage::new(size, pixels);
+    }
+    let scale = vec2(pw as f32 / image_size.x, ph as f32 / image_size.y);
+    let texel = |x: usize, y: usize| photo.pixels[y * pw + x];
+    let lerp = |a: Color32, b: Color32, t: f32| {
+        let mix = |p: u8, q: u8| (p as f32 + (q as f32 - p as f32) * t).round() as u8;
+        Color32::from_rgba_premultiplied(
+            mix(a.r(), b.r()),
+            mix(a.g(), b.g()),
+            mix(a.b(), b.b()),
+            mix(a.a(), b.a()),
+        )
+    };
+    for y in 0..height {
+        let screen_y = transform.rect.min.y + (y as f32 + 0.5) / pixels_per_point;
+        let v = transform.center.y + (screen_y - transform.rect.center().y) / transform.zoom;
+        if v < 0.0 || v >= image_size.y {
+            continue;
+        }
+        let fy = (v * scale.y - 0.5).clamp(0.0, (ph - 1) as f32);
+        let (y0, ty) = (fy.floor() as usize, fy.fract());
+        let y1 = (y0 + 1).min(ph - 1);
+        for x in 0..width {
+            let screen_x = transform.rect.min.x + (x as f32 + 0.5) / pixels_per_point;
+            let u = transform.center.x + (screen_x - transform.rect.center().x) / transform.zoom;
+            if u < 0.0 || u >= image_size.x {
+                continue;
+            }
+            let fx = (u * scale.x - 0.5).clamp(0.0, (pw - 1) as f32);
+            let (x0, tx) = (fx.floor() as usize, fx.fract());
+            let x1 = (x0 + 1).min(pw - 1);
+            let top = lerp(texel(x0, y0), texel(x1, y0), tx);
+            let bottom = lerp(texel(x0, y1), texel(x1, y1), tx);
+            pixels[y * width + x] = lerp(top, bottom, ty);
+        }
+    }
+    ColorImage::new(size, pixels)
+}
+
+/// Splats projected points as squares (about 2.4·√zoom screen points wide, 2–7) into a
+/// panel-sized image, `pixels_per_point` texels per point; later points overwrite earlier
+/// ones, translucent colours are blended over what is there.
+fn splat_points(
+    image: &mut ColorImage,
+    projections: &[(u32, [f32; 2])],
+    transform: &ViewTransform,
+    pixels_per_point: f32,
+    color_of: impl Fn(u32) -> Color32,
+) {
+    let [width, height] = image.size;
     let half = ((1.2 * transform.zoom.sqrt()).clamp(1.0, 3.5) * pixels_per_point).round() as i64;
     let (w, h) = (width as i64, height as i64);
     for &(point, uv) in projections {
@@ -272,11 +327,15 @@ fn rasterize_points(
         for yy in (y - half + 1).max(0)..(y + half).min(h) {
             let row = yy as usize * width;
             for xx in (x - half + 1).max(0)..(x + half).min(w) {
-                pixels[row + xx as usize] = color;
+                let under = &mut image.pixels[row + xx as usize];
+                *under = if color.a() == 255 {
+                    color
+                } else {
+                    color.blend(*under)
+                };
             }
         }
     }
-    ColorImage::new(size, pixels)
 }
 
 /// A thin quad from `a` to `b` added to a mesh (cheaper than tessellated lines by the 100k).
@@ -347,11 +406,15 @@ impl ImagePanel {
                 if let Loadable::Loading(receiver) = load {
                     match receiver.try_recv() {
                         Ok(Ok(image)) => {
-                            *load = Loadable::Ready(ctx.load_texture(
-                                format!("{kind}_{view}"),
-                                image,
-                                egui::TextureOptions::LINEAR,
-                            ))
+                            let pixels = Arc::new(image.clone());
+                            *load = Loadable::Ready(
+                                ctx.load_texture(
+                                    format!("{kind}_{view}"),
+                                    image,
+                                    egui::TextureOptions::LINEAR,
+                                ),
+                                pixels,
+                            )
                         }
                         Ok(Err(message)) => *load = Loadable::Failed(message),
                         Err(TryRecvError::Empty) => ctx.request_repaint(),
@@ -604,18 +667,22 @@ impl ImagePanel {
         };
         self.transform = Some(transform);
 
-        painter.rect_filled(rect, 0.0, Color32::from_gray(24));
         let image_rect = Rect::from_min_max(
             transform.screen_from_image([0.0, 0.0]),
             transform.screen_from_image([size.x as f64, size.y as f64]),
         );
         let full_uv = Rect::from_min_max(pos2(0.0, 0.0), pos2(1.0, 1.0));
-        painter.rect_filled(image_rect, 0.0, Color32::from_gray(40));
+        // The photo itself is drawn by the composite below (one layer, not two).
+        let photo = match self.photos.get(&view) {
+            Some(Loadable::Ready(_, pixels)) if self.overlays.photo => Some(Arc::clone(pixels)),
+            _ => None,
+        };
+        if photo.is_none() {
+            painter.rect_filled(image_rect, 0.0, Color32::from_gray(40));
+        }
         if self.overlays.photo {
             match self.photos.get(&view) {
-                Some(Loadable::Ready(texture)) => {
-                    painter.image(texture.id(), image_rect, full_uv, Color32::WHITE);
-                }
+                Some(Loadable::Ready(..)) => {}
                 Some(Loadable::Failed(message)) => {
                     painter.text(
                         image_rect.center(),
@@ -637,7 +704,7 @@ impl ImagePanel {
             }
         }
         if self.overlays.gradient
-            && let Some(Loadable::Ready(texture)) = self.gradients.get(&view)
+            && let Some(Loadable::Ready(texture, _)) = self.gradients.get(&view)
         {
             let tint = if self.overlays.photo {
                 Color32::from_white_alpha(200)
@@ -690,9 +757,7 @@ impl ImagePanel {
             }
             painter.add(Shape::mesh(mesh));
         }
-        if self.overlays.points
-            && let Some(projections) = &projections
-        {
+        if photo.is_some() || self.overlays.points {
             let pixels_per_point = ui.ctx().pixels_per_point();
             let key = PointsOverlayKey {
                 view,
@@ -703,21 +768,31 @@ impl ImagePanel {
                 ],
                 center: [self.center.x.to_bits(), self.center.y.to_bits()],
                 zoom: self.zoom.to_bits(),
+                photo: photo.is_some(),
+                points: self.overlays.points,
             };
             if self.points_overlay.as_ref().is_none_or(|(k, _)| *k != key) {
-                let image = rasterize_points(
-                    projections,
-                    &transform,
-                    key.size,
-                    pixels_per_point,
-                    |point| {
-                        let segment = segment_of[point as usize];
-                        segment_color(segment, label_of(segment))
-                    },
-                );
+                let mut image = match &photo {
+                    Some(photo) => {
+                        resample_photo(photo, size, &transform, key.size, pixels_per_point)
+                    }
+                    None => ColorImage::filled(key.size, Color32::TRANSPARENT),
+                };
+                if let Some(projections) = projections.as_ref().filter(|_| self.overlays.points) {
+                    splat_points(
+                        &mut image,
+                        projections,
+                        &transform,
+                        pixels_per_point,
+                        |point| {
+                            let segment = segment_of[point as usize];
+                            segment_color(segment, label_of(segment))
+                        },
+                    );
+                }
                 let texture =
                     ui.ctx()
-                        .load_texture("points_overlay", image, egui::TextureOptions::NEAREST);
+                        .load_texture("photo_view", image, egui::TextureOptions::NEAREST);
                 self.points_overlay = Some((key, texture));
             }
             if let Some((_, texture)) = &self.points_overlay {
@@ -1198,7 +1273,8 @@ mod tests {
             (1, [90.0, 70.0]),
             (2, [500.0, 10.0]),
         ];
-        let image = rasterize_points(&projections, &transform, [200, 160], 2.0, |p| {
+        let mut image = ColorImage::filled([200, 160], Color32::TRANSPARENT);
+        splat_points(&mut image, &projections, &transform, 2.0, |p| {
             [Color32::RED, Color32::GREEN, Color32::BLUE][p as usize]
         });
         // Image pixel (10.5, 20.5) is screen (60.5, 40.5), texel (21, 41) at 2 px per point.
@@ -1212,6 +1288,28 @@ mod tests {
             .filter(|c| **c != Color32::TRANSPARENT)
             .count();
         assert!(covered > 0 && covered <= 2 * 4 * 4, "{covered}");
+    }
+
+    #[test]
+    fn the_photo_is_resampled_where_the_view_shows_it() {
+        // A 4×2 photo of a 40×20 camera, shown at zoom 2 centred on the image.
+        let photo = ColorImage::new([4, 2], (0..8).map(|k| Color32::from_gray(k * 30)).collect());
+        let transform = ViewTransform {
+            rect: Rect::from_min_size(pos2(0.0, 0.0), vec2(100.0, 60.0)),
+            center: vec2(20.0, 10.0),
+            zoom: 2.0,
+        };
+        let image = resample_photo(&photo, vec2(40.0, 20.0), &transform, [100, 60], 1.0);
+        // The photo spans screen x 10..90, y 10..50; outside is transparent.
+        assert_eq!(image.pixels[5 * 100 + 50], Color32::TRANSPARENT);
+        assert_eq!(image.pixels[30 * 100 + 5], Color32::TRANSPARENT);
+        // Near the centre of photo texel (0, 0) (camera pixel (5, 5), screen (20, 20)).
+        assert!(image.pixels[20 * 100 + 20].r() <= 5);
+        // Texel (3, 1) is at camera (35, 15), screen (80, 40).
+        assert_eq!(image.pixels[40 * 100 + 80], Color32::from_gray(210));
+        // Half-way between texels (1, 0) and (2, 0) (30 and 60): about their mean.
+        let between = image.pixels[20 * 100 + 50];
+        assert!((44..=52).contains(&between.r()), "{between:?}");
     }
 
     #[test]

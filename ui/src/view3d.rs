@@ -2,7 +2,8 @@
 //! control-point handles and camera frusta, drawn by the library's render core into its own
 //! targets and composited into the window's render pass through an `egui_wgpu` callback. An
 //! orbit camera turns about the plant: drag to orbit, right or middle drag to pan, scroll to
-//! zoom, double-click to frame the plant again.
+//! zoom, double-click to frame the plant again. While the view moves, a quarter of the points
+//! is drawn at half resolution; the full frame follows once it stops.
 
 use std::sync::Arc;
 
@@ -379,6 +380,8 @@ pub struct View3dResources {
     blit_layout: wgpu::BindGroupLayout,
     sampler: wgpu::Sampler,
     blit_group: Option<wgpu::BindGroup>,
+    /// Whether the window's target is not sRGB (the frame is then bound as plain UNORM).
+    encoded_target: bool,
     /// Seconds the CPU spent encoding the last re-rendered frame, and its triangles.
     pub last_frame: (f64, usize),
 }
@@ -401,21 +404,11 @@ fn vs_main(@builtin(vertex_index) index: u32) -> Varyings {
     return out;
 }
 
-// The frame is sampled as linear colour; a non-sRGB window target wants sRGB-encoded values.
-fn encode_srgb(c: vec3<f32>) -> vec3<f32> {
-    let low = c * 12.92;
-    let high = 1.055 * pow(c, vec3<f32>(1.0 / 2.4)) - 0.055;
-    return select(high, low, c <= vec3<f32>(0.0031308));
-}
-
+// The frame is bound as sRGB (decoded to linear) for an sRGB window target, else as plain
+// UNORM so the encoded bytes pass through unchanged: no per-pixel conversion either way.
 @fragment
-fn fs_srgb_target(in: Varyings) -> @location(0) vec4<f32> {
+fn fs_main(in: Varyings) -> @location(0) vec4<f32> {
     return vec4<f32>(textureSample(frame, frame_sampler, in.uv).rgb, 1.0);
-}
-
-@fragment
-fn fs_linear_target(in: Varyings) -> @location(0) vec4<f32> {
-    return vec4<f32>(encode_srgb(textureSample(frame, frame_sampler, in.uv).rgb), 1.0);
 }
 "#;
 
@@ -459,11 +452,7 @@ impl View3dResources {
             bind_group_layouts: &[Some(&blit_layout)],
             immediate_size: 0,
         });
-        let fragment_entry = if render_state.target_format.is_srgb() {
-            "fs_srgb_target"
-        } else {
-            "fs_linear_target"
-        };
+        let fragment_entry = "fs_main";
         let blit_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
             label: Some("3d panel blit"),
             layout: Some(&layout),
@@ -507,6 +496,7 @@ impl View3dResources {
                 blit_layout,
                 sampler,
                 blit_group: None,
+                encoded_target: !render_state.target_format.is_srgb(),
                 last_frame: (0.0, 0),
             });
         Ok(())
@@ -613,7 +603,7 @@ impl CallbackTrait for View3dCallback {
                 return Vec::new();
             }
         }
-        if let Some(view) = resources.renderer.color_view() {
+        if let Some(view) = resources.renderer.color_view(resources.encoded_target) {
             resources.blit_group = Some(device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("3d panel frame"),
                 layout: &resources.blit_layout,
@@ -741,8 +731,10 @@ impl View3d {
         }
         let painter = ui.painter_at(rect);
         let pixels_per_point = ui.ctx().pixels_per_point();
-        let width = (rect.width() * pixels_per_point).round().max(1.0) as u32;
-        let height = (rect.height() * pixels_per_point).round().max(1.0) as u32;
+        // Half resolution while the view moves (a quarter of the fragments), full once still.
+        let scale = if moving { 0.5 } else { 1.0 };
+        let width = (rect.width() * pixels_per_point * scale).round().max(1.0) as u32;
+        let height = (rect.height() * pixels_per_point * scale).round().max(1.0) as u32;
         if gpu {
             painter.add(egui_wgpu::Callback::new_paint_callback(
                 rect,
