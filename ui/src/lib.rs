@@ -907,6 +907,10 @@ impl FrondApp {
                     ui.checkbox(on, name);
                 }
                 ui.separator();
+                for (name, on) in self.view3d.show.toggles() {
+                    ui.checkbox(on, name);
+                }
+                ui.separator();
                 if ui
                     .add(egui::Button::new("Fit photo").shortcut_text("F"))
                     .clicked()

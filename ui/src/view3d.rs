@@ -28,8 +28,68 @@ const HANDLE: u32 = 1;
 const FRUSTUM: u32 = 2;
 const UNASSIGNED: u32 = 3;
 const FIRST_SEGMENT: u32 = 4;
-/// Index of the detail points among the palette meshes.
-const DETAIL_POINTS: usize = 1;
+/// What each palette mesh is, in `SceneData::palette_meshes` order.
+const PALETTE_PARTS: [Part; 4] = [
+    Part::CoarsePoints,
+    Part::DetailPoints,
+    Part::Branches,
+    Part::Handles,
+];
+
+/// A part of the 3D scene, for showing and hiding.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Part {
+    /// The points drawn while the view moves.
+    CoarsePoints,
+    /// The other points.
+    DetailPoints,
+    Branches,
+    /// Radius spheres and camera frusta.
+    Handles,
+    Leaf,
+}
+
+/// Which parts the 3D panel shows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Show3d {
+    pub points: bool,
+    pub leaves: bool,
+    pub branches: bool,
+    pub handles: bool,
+}
+
+impl Default for Show3d {
+    fn default() -> Self {
+        Self {
+            points: true,
+            leaves: true,
+            branches: true,
+            handles: true,
+        }
+    }
+}
+
+impl Show3d {
+    /// Every part with its menu name, for toggles.
+    pub fn toggles(&mut self) -> [(&'static str, &mut bool); 4] {
+        [
+            ("3D: points", &mut self.points),
+            ("3D: fitted leaves", &mut self.leaves),
+            ("3D: branches", &mut self.branches),
+            ("3D: radius spheres and cameras", &mut self.handles),
+        ]
+    }
+
+    fn shows(&self, part: Part, moving: bool) -> bool {
+        match part {
+            Part::CoarsePoints => self.points,
+            Part::DetailPoints => self.points && !moving,
+            Part::Branches => self.branches,
+            Part::Handles => self.handles,
+            Part::Leaf => self.leaves,
+        }
+    }
+}
 /// The view counts as moving for this long after its camera last changed (seconds).
 const SETTLE_SECONDS: f64 = 0.25;
 /// Vertical field of view of the 3D panel.
@@ -370,12 +430,17 @@ impl SceneData {
     }
 }
 
+/// A scene on the GPU: the content key it was built for, and what each mesh is.
+type UploadedScene = ((u64, u64), GpuScene, Vec<(Part, MeshHandle)>);
+/// What a rendered frame shows: content key, camera, moving, parts shown.
+type FrameKey = ((u64, u64), [u64; 8], bool, Show3d);
+
 /// GPU state of the 3D panel, kept in egui_wgpu's callback resources.
 pub struct View3dResources {
     renderer: Renderer,
-    /// The uploaded scene and its mesh of detail points.
-    scene: Option<((u64, u64), GpuScene, Option<MeshHandle>)>,
-    frame_key: Option<((u64, u64), [u64; 8], bool)>,
+    /// The uploaded scene and what each of its meshes is.
+    scene: Option<UploadedScene>,
+    frame_key: Option<FrameKey>,
     blit_pipeline: wgpu::RenderPipeline,
     blit_layout: wgpu::BindGroupLayout,
     sampler: wgpu::Sampler,
@@ -502,28 +567,27 @@ impl View3dResources {
         Ok(())
     }
 
-    fn upload(&mut self, data: &SceneData) -> Result<(GpuScene, Option<MeshHandle>), String> {
+    fn upload(&mut self, data: &SceneData) -> Result<(GpuScene, Vec<(Part, MeshHandle)>), String> {
         let renderer = &self.renderer;
         let mut scene = renderer.new_scene();
         let palette = renderer.add_texture(&mut scene, &data.palette);
-        let mut detail = None;
-        for (k, mesh) in data.palette_meshes.iter().enumerate() {
+        let mut parts = Vec::new();
+        for (k, (mesh, part)) in data.palette_meshes.iter().zip(PALETTE_PARTS).enumerate() {
             if !mesh.triangles.is_empty() {
                 let handle = renderer
                     .add_mesh(&mut scene, mesh, palette, k as u32 + 1, false)
                     .map_err(|e| e.to_string())?;
-                if k == DETAIL_POINTS {
-                    detail = Some(handle);
-                }
+                parts.push((part, handle));
             }
         }
         for (k, (mesh, texture)) in data.leaves.iter().enumerate() {
             let texture: TextureHandle = renderer.add_cutout_texture(&mut scene, texture);
-            renderer
+            let handle = renderer
                 .add_mesh(&mut scene, mesh, texture, 100 + k as u32, true)
                 .map_err(|e| e.to_string())?;
+            parts.push((Part::Leaf, handle));
         }
-        Ok((scene, detail))
+        Ok((scene, parts))
     }
 }
 
@@ -533,6 +597,7 @@ struct View3dCallback {
     camera: ViewCamera,
     /// Draw only the coarse points (the view is moving).
     moving: bool,
+    show: Show3d,
 }
 
 fn camera_key(camera: &ViewCamera) -> [u64; 8] {
@@ -568,7 +633,7 @@ impl CallbackTrait for View3dCallback {
             .is_none_or(|(key, _, _)| *key != self.data.key)
         {
             match resources.upload(&self.data) {
-                Ok((scene, detail)) => resources.scene = Some((self.data.key, scene, detail)),
+                Ok((scene, parts)) => resources.scene = Some((self.data.key, scene, parts)),
                 Err(e) => {
                     tracing::warn!("3D panel: {e}");
                     return Vec::new();
@@ -576,15 +641,20 @@ impl CallbackTrait for View3dCallback {
             }
             resources.frame_key = None;
         }
-        let frame_key = (self.data.key, camera_key(&self.camera), self.moving);
+        let frame_key = (
+            self.data.key,
+            camera_key(&self.camera),
+            self.moving,
+            self.show,
+        );
         if resources.frame_key == Some(frame_key) {
             return Vec::new();
         }
-        let Some((_, scene, detail)) = resources.scene.as_mut() else {
+        let Some((_, scene, parts)) = resources.scene.as_mut() else {
             return Vec::new();
         };
-        if let Some(detail) = detail {
-            scene.set_visible(*detail, !self.moving);
+        for &(part, handle) in parts.iter() {
+            scene.set_visible(handle, self.show.shows(part, self.moving));
         }
         let scene = &*scene;
         let clock = std::time::Instant::now();
@@ -645,6 +715,7 @@ impl CallbackTrait for View3dCallback {
 #[derive(Default)]
 pub struct View3d {
     pub orbit: Option<Orbit>,
+    pub show: Show3d,
     data: Option<Arc<SceneData>>,
     extent: f64,
     /// The camera of the last frame and when it last changed.
@@ -655,7 +726,10 @@ pub struct View3d {
 impl View3d {
     /// Forgets the previous workspace.
     pub fn reset(&mut self) {
-        *self = Self::default();
+        *self = Self {
+            show: self.show,
+            ..Self::default()
+        };
     }
 
     /// The content drawn, rebuilt when the workspace changed.
@@ -742,6 +816,7 @@ impl View3d {
                     data: Arc::clone(&data),
                     camera: orbit.view_camera(width, height),
                     moving,
+                    show: self.show,
                 },
             ));
         } else {
