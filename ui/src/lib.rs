@@ -252,6 +252,11 @@ impl FrondApp {
         self.status.as_ref()
     }
 
+    /// Clears the status bar's message.
+    pub fn clear_status(&mut self) {
+        self.status = None;
+    }
+
     /// The autosave offered for recovery.
     pub fn recovery(&self) -> Option<&Path> {
         self.recovery.as_deref()
@@ -1027,7 +1032,7 @@ impl FrondApp {
             });
         ui.separator();
         ui.horizontal(|ui| {
-            ui.label("Mark non-leaf as");
+            let caption = ui.label("Mark non-leaf as");
             egui::ComboBox::from_id_salt("non_leaf_label")
                 .selected_text(format!("{:?}", self.panel.non_leaf_label))
                 .show_ui(ui, |ui| {
@@ -1038,7 +1043,9 @@ impl FrondApp {
                             format!("{label:?}"),
                         );
                     }
-                });
+                })
+                .response
+                .labelled_by(caption.id);
         });
         ui.separator();
         ui.strong("Generic leaf");
@@ -1475,6 +1482,8 @@ impl FrondApp {
         egui::Window::new("Shortcuts")
             .open(&mut open)
             .resizable(false)
+            .pivot(egui::Align2::CENTER_CENTER)
+            .default_pos(ctx.content_rect().center())
             .show(ctx, |ui| {
                 egui::Grid::new("shortcuts").striped(true).show(ui, |ui| {
                     let general = [

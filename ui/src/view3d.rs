@@ -824,7 +824,7 @@ impl View3d {
             painter.text(
                 rect.center(),
                 egui::Align2::CENTER_CENTER,
-                "The 3D view needs the GPU renderer (run frond-ui in a window).",
+                "3D view: needs the GPU renderer",
                 egui::FontId::proportional(14.0),
                 Color32::from_gray(160),
             );
