@@ -1303,13 +1303,13 @@ impl FrondApp {
         let mut actions = Vec::new();
         match self.layout {
             CentralLayout::Photo => actions = self.panel.ui(ui, workspace, self.tool),
-            CentralLayout::ThreeD => self.view3d.ui(ui, workspace, self.gpu),
+            CentralLayout::ThreeD => actions = self.view3d.ui(ui, workspace, self.gpu, self.tool),
             CentralLayout::Both => {
                 let (panel, view3d, tool, gpu) =
                     (&mut self.panel, &mut self.view3d, self.tool, self.gpu);
                 ui.columns(2, |columns| {
                     actions = panel.ui(&mut columns[0], workspace, tool);
-                    view3d.ui(&mut columns[1], workspace, gpu);
+                    actions.extend(view3d.ui(&mut columns[1], workspace, gpu, tool));
                 });
             }
         }

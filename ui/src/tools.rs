@@ -130,9 +130,11 @@ impl Tool {
                 "Click a well-seen, flat, whole leaf: it becomes the generic leaf every leaf is fitted from."
             }
             Tool::DrawBranch => {
-                "Drag from a point on a branch along a stem or petiole; the points under the stroke give it depth."
+                "Drag from a point on a branch along a stem or petiole, in a photo or the 3D view; the points under the stroke give it depth."
             }
-            Tool::MoveBranch => "Drag a control point (square) of a branch; children follow.",
+            Tool::MoveBranch => {
+                "Drag a control point of a branch (squares in a photo), in a photo or the 3D view; children follow."
+            }
             Tool::Radius => "Drag out from a branch end (circle) to set its radius.",
             Tool::LeafAtTip => "Click a branch to add or remove a leaf at its tip.",
             Tool::DeleteBranch => "Click a branch to delete it and everything growing from it.",

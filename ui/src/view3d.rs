@@ -17,8 +17,10 @@ use frond::render::{GpuScene, Lighting, MeshHandle, Renderer, TextureHandle, Vie
 use image::RgbaImage;
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
-use crate::image_view::segment_color;
+use crate::image_view::{Action, segment_color};
+use crate::tools::Tool;
 use crate::workspace::Workspace;
+use frond::edit::{BranchStroke, BranchTarget, Command, ViewCamera as EditCamera};
 
 /// Side of the palette texture: colour `k` is texel `(k mod side, k div side)`.
 const PALETTE_SIDE: u32 = 64;
@@ -92,6 +94,8 @@ impl Show3d {
 }
 /// The view counts as moving for this long after its camera last changed (seconds).
 const SETTLE_SECONDS: f64 = 0.25;
+/// Control points are grabbed within this distance (screen points).
+const GRAB_DISTANCE_PX: f64 = 12.0;
 /// Vertical field of view of the 3D panel.
 const FIELD_OF_VIEW_DEG: f64 = 45.0;
 /// Background (linear RGB).
@@ -721,6 +725,11 @@ pub struct View3d {
     /// The camera of the last frame and when it last changed.
     last_orbit: Option<Orbit>,
     moved_at: Option<std::time::Instant>,
+    /// The panel's rectangle in the last frame.
+    pub rect: Option<egui::Rect>,
+    /// A branch stroke being drawn (pixels of this view) and a grabbed control point.
+    stroke: Vec<[f64; 2]>,
+    grabbed: Option<(u32, usize)>,
 }
 
 impl View3d {
@@ -755,8 +764,19 @@ impl View3d {
     }
 
     /// Draws the panel; `gpu` says whether the render core is installed in the window.
-    pub fn ui(&mut self, ui: &mut egui::Ui, workspace: &Workspace, gpu: bool) {
+    /// Draws the panel; `gpu` says whether the render core is installed in the window. The
+    /// branch tools Draw and Move work here too (their strokes are pixels of this view's
+    /// camera); any other tool orbits with the primary button.
+    pub fn ui(
+        &mut self,
+        ui: &mut egui::Ui,
+        workspace: &Workspace,
+        gpu: bool,
+        tool: Tool,
+    ) -> Vec<Action> {
+        let mut actions = Vec::new();
         let (rect, response) = ui.allocate_exact_size(ui.available_size(), Sense::click_and_drag());
+        self.rect = Some(rect);
         let data = self.data(workspace);
         let Some(orbit) = self.orbit.as_mut() else {
             ui.painter().text(
@@ -766,9 +786,10 @@ impl View3d {
                 egui::FontId::proportional(14.0),
                 Color32::from_gray(160),
             );
-            return;
+            return actions;
         };
-        if response.dragged_by(egui::PointerButton::Primary) {
+        let branch_tool = matches!(tool, Tool::DrawBranch | Tool::MoveBranch);
+        if response.dragged_by(egui::PointerButton::Primary) && !branch_tool {
             orbit.rotate(response.drag_delta());
         }
         if response.dragged_by(egui::PointerButton::Secondary)
@@ -787,8 +808,11 @@ impl View3d {
             self.orbit = Orbit::frame(workspace);
         }
         let Some(orbit) = self.orbit else {
-            return;
+            return actions;
         };
+        if branch_tool {
+            actions.extend(self.branch_tool(ui, &response, workspace, &orbit, tool));
+        }
         if self.last_orbit != Some(orbit) {
             if self.last_orbit.is_some() {
                 self.moved_at = Some(std::time::Instant::now());
@@ -841,6 +865,116 @@ impl View3d {
             egui::FontId::proportional(13.0),
             Color32::from_gray(220),
         );
+        if self.stroke.len() >= 2 {
+            let accent = ui.visuals().selection.stroke.color;
+            let points: Vec<egui::Pos2> = self
+                .stroke
+                .iter()
+                .map(|&[x, y]| rect.min + egui::vec2(x as f32, y as f32) / pixels_per_point)
+                .collect();
+            painter.add(egui::Shape::line(points, egui::Stroke::new(2.0, accent)));
+        }
+        actions
+    }
+
+    /// The editing session's camera for this view (pixels at full resolution).
+    pub fn edit_camera(&self, orbit: &Orbit, pixels_per_point: f32) -> Option<EditCamera> {
+        let rect = self.rect?;
+        let width = (rect.width() * pixels_per_point).round().max(1.0) as u32;
+        let height = (rect.height() * pixels_per_point).round().max(1.0) as u32;
+        let view = orbit.view_camera(width, height);
+        let q = view.camera_from_world.rotation.quaternion().coords;
+        let t = view.camera_from_world.translation.vector;
+        Some(EditCamera {
+            rotation: [q.w, q.x, q.y, q.z],
+            translation: [t.x, t.y, t.z],
+            focal_px: view.fx,
+            width,
+            height,
+        })
+    }
+
+    /// Draw and Move in the 3D view.
+    fn branch_tool(
+        &mut self,
+        ui: &egui::Ui,
+        response: &egui::Response,
+        workspace: &Workspace,
+        orbit: &Orbit,
+        tool: Tool,
+    ) -> Vec<Action> {
+        let primary = egui::PointerButton::Primary;
+        let pixels_per_point = ui.ctx().pixels_per_point();
+        let rect = response.rect;
+        let to_pixel = |p: egui::Pos2| {
+            let v = (p - rect.min) * pixels_per_point;
+            [v.x as f64, v.y as f64]
+        };
+        let Some(camera) = self.edit_camera(orbit, pixels_per_point) else {
+            return Vec::new();
+        };
+        let press_origin = ui.input(|i| i.pointer.press_origin());
+        let pointer = response.interact_pointer_pos();
+        if response.drag_started_by(primary)
+            && let Some(origin) = press_origin
+        {
+            if tool == Tool::DrawBranch {
+                self.stroke = vec![to_pixel(origin)];
+            } else {
+                let view = orbit.view_camera(camera.width, camera.height);
+                let target = to_pixel(origin);
+                let mut best: Option<(f64, u32, usize)> = None;
+                for branch in &workspace.session.branches().branches {
+                    for (k, p) in branch.cylinder.skeleton.control_points().iter().enumerate() {
+                        let Some((uv, _)) = view.project(p) else {
+                            continue;
+                        };
+                        let d = (uv.x - target[0]).hypot(uv.y - target[1]);
+                        if d <= GRAB_DISTANCE_PX * pixels_per_point as f64
+                            && best.is_none_or(|(b, _, _)| d < b)
+                        {
+                            best = Some((d, branch.id, k));
+                        }
+                    }
+                }
+                self.grabbed = best.map(|(_, branch, k)| (branch, k));
+                if self.grabbed.is_none() {
+                    return vec![Action::Message(
+                        "no control point there: press on a branch's control point".into(),
+                    )];
+                }
+            }
+        } else if response.dragged_by(primary)
+            && let Some(p) = pointer
+            && tool == Tool::DrawBranch
+            && let Some(last) = self.stroke.last()
+        {
+            let pixel = to_pixel(p);
+            if (pixel[0] - last[0]).hypot(pixel[1] - last[1]) >= 2.0 * pixels_per_point as f64 {
+                self.stroke.push(pixel);
+            }
+        } else if response.drag_stopped_by(primary) {
+            if tool == Tool::DrawBranch {
+                let stroke = std::mem::take(&mut self.stroke);
+                if stroke.len() >= 2 {
+                    return vec![Action::Apply(Command::DrawBranch {
+                        stroke: BranchStroke::View { camera, stroke },
+                        radius: None,
+                    })];
+                }
+            } else if let (Some((branch, control_point)), Some(p)) = (self.grabbed.take(), pointer)
+            {
+                return vec![Action::Apply(Command::MoveBranch {
+                    branch,
+                    control_point,
+                    to: BranchTarget::View {
+                        camera,
+                        pixel: to_pixel(p),
+                    },
+                })];
+            }
+        }
+        Vec::new()
     }
 }
 

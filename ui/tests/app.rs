@@ -443,6 +443,72 @@ fn branch_tools_edit_the_branch_tree_with_undo() {
 }
 
 #[test]
+fn branches_are_drawn_and_moved_in_the_3d_view() {
+    let config = tempfile::tempdir().unwrap();
+    let mut harness = harness_with(dataset().to_path_buf(), config.path());
+    harness.state_mut().layout = frond_ui::CentralLayout::ThreeD;
+    harness.run_steps(3);
+    let before = session(&harness).branches().branches.len();
+    let stem = session(&harness).branches().branches[0].clone();
+    let app = harness.state();
+    let orbit = app.view3d.orbit.expect("the 3D view framed the plant");
+    let rect = app.view3d.rect.expect("the 3D view was drawn");
+    let ppp = harness.ctx.pixels_per_point();
+    let camera = orbit.view_camera(
+        (rect.width() * ppp).round() as u32,
+        (rect.height() * ppp).round() as u32,
+    );
+    let screen_of = |p: &Point3<f64>| {
+        let (uv, _) = camera.project(p).unwrap();
+        rect.min + egui::vec2(uv.x as f32, uv.y as f32) / ppp
+    };
+    let drag_screen = |harness: &mut Harness<'static, FrondApp>, points: &[Pos2]| {
+        harness.hover_at(points[0]);
+        harness.step();
+        press(harness, points[0], true);
+        for &p in &points[1..] {
+            harness.hover_at(p);
+            harness.step();
+        }
+        press(harness, points[points.len() - 1], false);
+        harness.step();
+    };
+
+    // Draw from the stem's middle out to the side.
+    key(&mut harness, Key::B);
+    let start = screen_of(&stem.cylinder.skeleton.point_at_fraction(0.5));
+    let stroke: Vec<Pos2> = (0..=10)
+        .map(|k| start + egui::vec2(5.0 * k as f32, -2.0 * k as f32))
+        .collect();
+    drag_screen(&mut harness, &stroke);
+    let tree = session(&harness).branches();
+    assert_eq!(
+        tree.branches.len(),
+        before + 1,
+        "{:?}",
+        harness.state().status()
+    );
+    let drawn = tree.branches.last().unwrap().clone();
+    assert!(drawn.parent.is_some());
+    assert_eq!(history_len(&harness), (1, 1));
+
+    // Move its last control point 20 points down in the view.
+    key(&mut harness, Key::V);
+    let last = drawn.cylinder.skeleton.control_points().len() - 1;
+    let tip = screen_of(&drawn.cylinder.skeleton.control_points()[last]);
+    let target = tip + egui::vec2(0.0, 20.0);
+    drag_screen(&mut harness, &[tip, tip + egui::vec2(0.0, 8.0), target]);
+    let moved = session(&harness).branches().get(drawn.id).unwrap().clone();
+    let moved_tip = screen_of(&moved.cylinder.skeleton.control_points()[last]);
+    assert!(
+        (moved_tip - target).length() < 2.0,
+        "tip {tip:?} went to {moved_tip:?}, not {target:?}: {:?}",
+        harness.state().status()
+    );
+    assert_eq!(history_len(&harness), (2, 2));
+}
+
+#[test]
 fn saving_autosave_and_crash_recovery_keep_the_edits() {
     let config = tempfile::tempdir().unwrap();
     let mut harness = harness_with(dataset().to_path_buf(), config.path());
