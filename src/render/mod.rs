@@ -38,7 +38,7 @@ pub enum RenderError {
     Readback(String),
 }
 
-/// Multisampling of the colour pass.
+/// Multisampling of the colour pass (unless a renderer is made with another count).
 const COLOR_SAMPLES: u32 = 4;
 const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
@@ -266,6 +266,8 @@ pub struct Renderer {
     color_pipeline: wgpu::RenderPipeline,
     id_pipeline: wgpu::RenderPipeline,
     max_texture_side: u32,
+    /// Samples per pixel of the colour pass.
+    color_samples: u32,
     targets: Option<Targets>,
     /// One identity transform, bound for static meshes.
     identity_instance: wgpu::Buffer,
@@ -276,6 +278,8 @@ pub struct Renderer {
 struct Targets {
     width: u32,
     height: u32,
+    /// Samples of the colour pass (1: it draws straight into `color_resolved`).
+    samples: u32,
     color_msaa: wgpu::TextureView,
     color_resolved: wgpu::Texture,
     color_resolved_view: wgpu::TextureView,
@@ -373,6 +377,11 @@ impl Renderer {
     /// Creates a headless renderer on the best available adapter (a real GPU if present,
     /// else software Vulkan).
     pub fn new() -> Result<Self, RenderError> {
+        Self::new_with_samples(COLOR_SAMPLES)
+    }
+
+    /// A headless renderer whose colour pass takes `color_samples` (1 or 4) per pixel.
+    pub fn new_with_samples(color_samples: u32) -> Result<Self, RenderError> {
         // Vulkan/Metal/DX12 unless WGPU_BACKEND says otherwise (probing GL on a headless
         // machine only produces EGL errors).
         let mut descriptor = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
@@ -397,16 +406,23 @@ impl Renderer {
         }))
         .map_err(|e| RenderError::Device(e.to_string()))?;
         tracing::info!(adapter = %adapter_info.name, backend = ?adapter_info.backend, "renderer ready");
-        Self::with_device(device, queue, adapter_info)
+        Self::with_device(device, queue, adapter_info, color_samples)
     }
 
     /// A renderer on an existing device (the GUI's, so its frames can be drawn into the
-    /// window's render pass).
+    /// window's render pass), with `color_samples` samples per pixel in the colour pass (1 or
+    /// 4: 1 suits software rasterisers, where every sample costs).
     pub fn with_device(
         device: wgpu::Device,
         queue: wgpu::Queue,
         adapter_info: wgpu::AdapterInfo,
+        color_samples: u32,
     ) -> Result<Self, RenderError> {
+        if !matches!(color_samples, 1 | 4) {
+            return Err(RenderError::Device(format!(
+                "{color_samples} colour samples: 1 or 4 are supported"
+            )));
+        }
         let limits = device.limits();
 
         let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -558,7 +574,7 @@ impl Renderer {
                 blend: None,
                 write_mask: wgpu::ColorWrites::ALL,
             })],
-            COLOR_SAMPLES,
+            color_samples,
         );
         let id_pipeline = make_pipeline(
             "id and depth",
@@ -602,6 +618,7 @@ impl Renderer {
             identity_instance,
             instance_buffer: None,
             max_texture_side: limits.max_texture_dimension_2d,
+            color_samples,
             device,
             queue,
             adapter_info,
@@ -839,8 +856,9 @@ impl Renderer {
         let attachment = wgpu::TextureUsages::RENDER_ATTACHMENT;
         let readable = attachment | wgpu::TextureUsages::COPY_SRC;
         let view = |t: &wgpu::Texture| t.create_view(&wgpu::TextureViewDescriptor::default());
-        let color_msaa = texture("colour msaa", COLOR_FORMAT, COLOR_SAMPLES, attachment);
-        let depth_msaa = texture("depth msaa", DEPTH_FORMAT, COLOR_SAMPLES, attachment);
+        let samples = self.color_samples;
+        let color_msaa = texture("colour msaa", COLOR_FORMAT, samples, attachment);
+        let depth_msaa = texture("depth msaa", DEPTH_FORMAT, samples, attachment);
         let depth_single = texture("depth", DEPTH_FORMAT, 1, attachment);
         let color_resolved = texture(
             "colour",
@@ -851,6 +869,7 @@ impl Renderer {
         self.targets = Some(Targets {
             width,
             height,
+            samples,
             color_msaa: view(&color_msaa),
             color_resolved_view: view(&color_resolved),
             color_resolved_encoded_view: color_resolved.create_view(&wgpu::TextureViewDescriptor {
@@ -1224,12 +1243,20 @@ fn begin_color_pass<'a>(
     encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
         label: Some("colour"),
         color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-            view: &targets.color_msaa,
+            view: if targets.samples > 1 {
+                &targets.color_msaa
+            } else {
+                &targets.color_resolved_view
+            },
             depth_slice: None,
-            resolve_target: Some(&targets.color_resolved_view),
+            resolve_target: (targets.samples > 1).then_some(&targets.color_resolved_view),
             ops: wgpu::Operations {
                 load: wgpu::LoadOp::Clear(clear),
-                store: wgpu::StoreOp::Discard,
+                store: if targets.samples > 1 {
+                    wgpu::StoreOp::Discard
+                } else {
+                    wgpu::StoreOp::Store
+                },
             },
         })],
         depth_stencil_attachment: Some(cleared_depth(&targets.depth_msaa)),
@@ -1401,6 +1428,34 @@ mod tests {
         }
         assert!(covered > 500, "square too small: {covered} pixels");
         assert_eq!(disagreements, 0, "rasterizer and projection disagree");
+    }
+
+    #[test]
+    fn a_single_sample_colour_pass_covers_exactly_the_id_pass_pixels() {
+        let mut renderer = Renderer::new_with_samples(1).unwrap();
+        let mut scene = renderer.new_scene();
+        let white = RgbaImage::from_pixel(4, 4, image::Rgba([255, 255, 255, 255]));
+        let texture = renderer.add_texture(&mut scene, &white);
+        renderer
+            .add_mesh(
+                &mut scene,
+                &square_at(Point3::new(0.1, 0.05, 0.0), 0.3),
+                texture,
+                7,
+                false,
+            )
+            .unwrap();
+        let out = renderer
+            .render(&scene, &camera(160, 120), &Lighting::default())
+            .unwrap();
+        let mut covered = 0;
+        for (pixel, id) in out.color.pixels().zip(&out.object_id) {
+            let lit = pixel.0[..3].iter().any(|&c| c > 0);
+            assert_eq!(lit, *id != 0);
+            covered += lit as usize;
+        }
+        assert!(covered > 100, "{covered}");
+        assert!(Renderer::new_with_samples(2).is_err());
     }
 
     #[test]

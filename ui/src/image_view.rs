@@ -1137,7 +1137,12 @@ fn draw_branches(
 ) {
     let _ = (workspace, view);
     let wood = Color32::from_rgb(235, 150, 60);
-    let show_handles = matches!(tool, Tool::MoveBranch | Tool::Radius | Tool::DrawBranch);
+    // Handles (radius circles, control points, ids) only while a branch tool is active: a
+    // plant with a hundred branches is otherwise cluttered, and slow on a software rasteriser.
+    let show_handles = matches!(
+        tool,
+        Tool::MoveBranch | Tool::Radius | Tool::DrawBranch | Tool::LeafAtTip | Tool::DeleteBranch
+    );
     for handle in handles {
         let curve: Vec<Pos2> = handle
             .curve
@@ -1146,7 +1151,7 @@ fn draw_branches(
             .collect();
         painter.add(Shape::line(curve.clone(), Stroke::new(4.0, Color32::BLACK)));
         painter.add(Shape::line(curve, Stroke::new(2.0, wood)));
-        for (uv, radius_px, _) in handle.ends.iter().flatten() {
+        for (uv, radius_px, _) in handle.ends.iter().flatten().filter(|_| show_handles) {
             let c = transform.screen_from_image(*uv);
             painter.circle_stroke(
                 c,
@@ -1176,7 +1181,7 @@ fn draw_branches(
                 );
             }
         }
-        if let Some(first) = handle.curve.first() {
+        if show_handles && let Some(first) = handle.curve.first() {
             painter.text(
                 transform.screen_from_image(*first) + vec2(6.0, -6.0),
                 egui::Align2::LEFT_BOTTOM,

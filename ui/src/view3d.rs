@@ -485,12 +485,16 @@ impl View3dResources {
     /// Puts the 3D panel's GPU state into eframe's renderer (once, at start-up).
     pub fn install(render_state: &RenderState) -> Result<(), String> {
         let device = &render_state.device;
-        let renderer = Renderer::with_device(
-            device.clone(),
-            render_state.queue.clone(),
-            render_state.adapter.get_info(),
-        )
-        .map_err(|e| e.to_string())?;
+        let adapter = render_state.adapter.get_info();
+        // Every sample costs on a software rasteriser: no multisampling there.
+        let samples = if adapter.device_type == wgpu::DeviceType::Cpu {
+            1
+        } else {
+            4
+        };
+        let renderer =
+            Renderer::with_device(device.clone(), render_state.queue.clone(), adapter, samples)
+                .map_err(|e| e.to_string())?;
         let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("3d panel blit"),
             source: wgpu::ShaderSource::Wgsl(BLIT_SHADER.into()),
