@@ -1346,6 +1346,14 @@ mod tests {
         Renderer::new().expect("a GPU adapter (llvmpipe on CI)")
     }
 
+    /// An empty scene and a white texture in it.
+    fn white_scene(renderer: &Renderer) -> (GpuScene, TextureHandle) {
+        let mut scene = renderer.new_scene();
+        let white = RgbaImage::from_pixel(4, 4, image::Rgba([255, 255, 255, 255]));
+        let texture = renderer.add_texture(&mut scene, &white);
+        (scene, texture)
+    }
+
     fn square_at(center: Point3<f32>, half: f32) -> TriMesh {
         let mut mesh = TriMesh {
             positions: vec![
@@ -1379,9 +1387,7 @@ mod tests {
     #[test]
     fn projected_square_covers_exactly_the_pixels_whose_centres_it_contains() {
         let mut renderer = renderer();
-        let mut scene = renderer.new_scene();
-        let white = RgbaImage::from_pixel(4, 4, image::Rgba([255, 255, 255, 255]));
-        let texture = renderer.add_texture(&mut scene, &white);
+        let (mut scene, texture) = white_scene(&renderer);
         let square = square_at(Point3::new(0.1, 0.05, 0.0), 0.3);
         renderer
             .add_mesh(&mut scene, &square, texture, 7, false)
@@ -1433,9 +1439,7 @@ mod tests {
     #[test]
     fn a_single_sample_colour_pass_covers_exactly_the_id_pass_pixels() {
         let mut renderer = Renderer::new_with_samples(1).unwrap();
-        let mut scene = renderer.new_scene();
-        let white = RgbaImage::from_pixel(4, 4, image::Rgba([255, 255, 255, 255]));
-        let texture = renderer.add_texture(&mut scene, &white);
+        let (mut scene, texture) = white_scene(&renderer);
         renderer
             .add_mesh(
                 &mut scene,
@@ -1461,9 +1465,7 @@ mod tests {
     #[test]
     fn hidden_meshes_are_not_drawn_until_shown_again() {
         let mut renderer = renderer();
-        let mut scene = renderer.new_scene();
-        let white = RgbaImage::from_pixel(4, 4, image::Rgba([255, 255, 255, 255]));
-        let texture = renderer.add_texture(&mut scene, &white);
+        let (mut scene, texture) = white_scene(&renderer);
         let left = renderer
             .add_mesh(
                 &mut scene,
@@ -1500,9 +1502,7 @@ mod tests {
     #[test]
     fn projected_vertex_lands_where_the_rasterizer_drew_it() {
         let mut renderer = renderer();
-        let mut scene = renderer.new_scene();
-        let white = RgbaImage::from_pixel(4, 4, image::Rgba([255, 255, 255, 255]));
-        let texture = renderer.add_texture(&mut scene, &white);
+        let (mut scene, texture) = white_scene(&renderer);
         let view = camera(200, 150);
         // Tiny squares around several world points: each must appear at the pixel its centre
         // projects to, with the right depth.

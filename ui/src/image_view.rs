@@ -266,7 +266,6 @@ fn resample_photo(
     if pw == 0 || ph == 0 {
         return ColorImage::new(size, pixels);
     }
-    let scale = vec2(pw as f32 / image_size.x, ph as f32 / image_size.y);
     let texel = |x: usize, y: usize| photo.pixels[y * pw + x];
     let lerp = |a: Color32, b: Color32, t: f32| {
         let mix = |p: u8, q: u8| (p as f32 + (q as f32 - p as f32) * t).round() as u8;
@@ -277,24 +276,44 @@ fn resample_photo(
             mix(a.a(), b.a()),
         )
     };
-    for y in 0..height {
-        let screen_y = transform.rect.min.y + (y as f32 + 0.5) / pixels_per_point;
-        let v = transform.center.y + (screen_y - transform.rect.center().y) / transform.zoom;
-        if v < 0.0 || v >= image_size.y {
-            continue;
+    // Per axis: the two photo texels a panel texel falls between and the weight of the
+    // second; `None` off the photo.
+    let taps = |texel: usize, axis: usize| -> Option<(usize, usize, f32)> {
+        let (rect_min, rect_center, center, extent, texels) = if axis == 0 {
+            (
+                transform.rect.min.x,
+                transform.rect.center().x,
+                transform.center.x,
+                image_size.x,
+                pw,
+            )
+        } else {
+            (
+                transform.rect.min.y,
+                transform.rect.center().y,
+                transform.center.y,
+                image_size.y,
+                ph,
+            )
+        };
+        let screen = rect_min + (texel as f32 + 0.5) / pixels_per_point;
+        let along = center + (screen - rect_center) / transform.zoom;
+        if along < 0.0 || along >= extent {
+            return None;
         }
-        let fy = (v * scale.y - 0.5).clamp(0.0, (ph - 1) as f32);
-        let (y0, ty) = (fy.floor() as usize, fy.fract());
-        let y1 = (y0 + 1).min(ph - 1);
-        for x in 0..width {
-            let screen_x = transform.rect.min.x + (x as f32 + 0.5) / pixels_per_point;
-            let u = transform.center.x + (screen_x - transform.rect.center().x) / transform.zoom;
-            if u < 0.0 || u >= image_size.x {
+        let f = (along * texels as f32 / extent - 0.5).clamp(0.0, (texels - 1) as f32);
+        let first = f.floor() as usize;
+        Some((first, (first + 1).min(texels - 1), f.fract()))
+    };
+    let columns: Vec<Option<(usize, usize, f32)>> = (0..width).map(|x| taps(x, 0)).collect();
+    for y in 0..height {
+        let Some((y0, y1, ty)) = taps(y, 1) else {
+            continue;
+        };
+        for (x, column) in columns.iter().enumerate() {
+            let Some((x0, x1, tx)) = *column else {
                 continue;
-            }
-            let fx = (u * scale.x - 0.5).clamp(0.0, (pw - 1) as f32);
-            let (x0, tx) = (fx.floor() as usize, fx.fract());
-            let x1 = (x0 + 1).min(pw - 1);
+            };
             let top = lerp(texel(x0, y0), texel(x1, y0), tx);
             let bottom = lerp(texel(x0, y1), texel(x1, y1), tx);
             pixels[y * width + x] = lerp(top, bottom, ty);

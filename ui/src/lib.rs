@@ -318,6 +318,9 @@ impl FrondApp {
             self.fail("wait for the running work to finish (or cancel it) first");
             return;
         }
+        // The worker owns the workspace until it hands it back; should it fail hard, the
+        // edits are in the autosave.
+        self.autosave_now();
         let Some(mut workspace) = self.workspace.take() else {
             self.fail("open a COLMAP folder or a project first");
             return;
@@ -473,8 +476,12 @@ impl FrondApp {
             }
             Poll::Lost => {
                 self.job = None;
-                self.workspace_busy = false;
-                self.fail("the worker stopped unexpectedly");
+                let held_workspace = std::mem::take(&mut self.workspace_busy);
+                self.fail(if held_workspace {
+                    "the worker stopped unexpectedly; reopen the input to recover the autosaved edits"
+                } else {
+                    "the worker stopped unexpectedly"
+                });
                 return;
             }
             Poll::Done(outcome) => outcome,
@@ -529,9 +536,13 @@ impl FrondApp {
     }
 
     fn autosave_tick(&mut self) {
-        if self.last_autosave.elapsed() < self.autosave_interval {
-            return;
+        if self.last_autosave.elapsed() >= self.autosave_interval {
+            self.autosave_now();
         }
+    }
+
+    /// Writes the autosave now if there are edits it lacks.
+    fn autosave_now(&mut self) {
         self.last_autosave = Instant::now();
         let (Some(workspace), Some(config)) = (self.workspace.as_mut(), &self.config) else {
             return;

@@ -3,6 +3,8 @@
 //! is checked; saving, autosave recovery, fitting, cancelling and export go through the menus
 //! and dialogs.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
@@ -12,8 +14,6 @@ use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
 use frond::edit::{Project, Session};
 use frond::graph::pipeline::SegmentLabel;
-use frond::synth::{Preset, SynthOptions, write_dataset};
-use frond::util::progress::NoProgress;
 use frond_ui::FrondApp;
 use frond_ui::files::ConfigDir;
 use frond_ui::tools::Tool;
@@ -31,20 +31,24 @@ fn dataset() -> &'static Path {
     static DIR: OnceLock<(TempDir, PathBuf)> = OnceLock::new();
     &DIR.get_or_init(|| {
         let dir = tempfile::tempdir().unwrap();
-        let root = dir.path().join("plant");
-        let options = SynthOptions {
-            preset: Preset::Broadleaf,
-            seed: 43,
-            views: 8,
-            width: 480,
-            height: 360,
-            target_points: 12_000,
-            ..SynthOptions::default()
-        };
-        write_dataset(&options, &root, &NoProgress).unwrap();
+        let root = common::write_synthetic_plant(dir.path());
         (dir, root)
     })
     .1
+}
+
+/// The branch a draw added (one more than `before`, with a parent).
+fn drawn_branch(harness: &Harness<'static, FrondApp>, before: usize) -> frond::branch::Branch {
+    let tree = session(harness).branches();
+    assert_eq!(
+        tree.branches.len(),
+        before + 1,
+        "{:?}",
+        harness.state().status()
+    );
+    let drawn = tree.branches.last().unwrap().clone();
+    assert!(drawn.parent.is_some());
+    drawn
 }
 
 fn harness_with(path: PathBuf, config: &Path) -> Harness<'static, FrondApp> {
@@ -365,15 +369,7 @@ fn branch_tools_edit_the_branch_tree_with_undo() {
         .map(|k| [start[0] + 6.0 * k as f64, start[1] - 2.0 * k as f64])
         .collect();
     drag(&mut harness, &stroke);
-    let tree = session(&harness).branches();
-    assert_eq!(
-        tree.branches.len(),
-        before + 1,
-        "{:?}",
-        harness.state().status()
-    );
-    let drawn = tree.branches.last().unwrap().clone();
-    assert!(drawn.parent.is_some());
+    let drawn = drawn_branch(&harness, before);
 
     // Move its last control point 25 px down.
     key(&mut harness, Key::V);
@@ -481,15 +477,7 @@ fn branches_are_drawn_and_moved_in_the_3d_view() {
         .map(|k| start + egui::vec2(5.0 * k as f32, -2.0 * k as f32))
         .collect();
     drag_screen(&mut harness, &stroke);
-    let tree = session(&harness).branches();
-    assert_eq!(
-        tree.branches.len(),
-        before + 1,
-        "{:?}",
-        harness.state().status()
-    );
-    let drawn = tree.branches.last().unwrap().clone();
-    assert!(drawn.parent.is_some());
+    let drawn = drawn_branch(&harness, before);
     assert_eq!(history_len(&harness), (1, 1));
 
     // Move its last control point 20 points down in the view.

@@ -2,12 +2,12 @@
 //! and compared with the images in `tests/snapshots/` (`UPDATE_SNAPSHOTS=1` rewrites them after
 //! an intended change; look at the new images before committing them).
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use egui_kittest::Harness;
-use frond::synth::{Preset, SynthOptions, write_dataset};
-use frond::util::progress::NoProgress;
 use frond_ui::FrondApp;
 use frond_ui::files::ConfigDir;
 
@@ -51,17 +51,7 @@ fn the_welcome_screen_and_the_shortcuts_match_their_snapshots() {
 #[test]
 fn the_editing_workspace_matches_its_snapshot() {
     let dir = tempfile::tempdir().unwrap();
-    let root = dir.path().join("plant");
-    let options = SynthOptions {
-        preset: Preset::Broadleaf,
-        seed: 43,
-        views: 8,
-        width: 480,
-        height: 360,
-        target_points: 12_000,
-        ..SynthOptions::default()
-    };
-    write_dataset(&options, &root, &NoProgress).unwrap();
+    let root = common::write_synthetic_plant(dir.path());
     let config = tempfile::tempdir().unwrap();
     let mut harness = harness(Some(root), config.path());
     assert!(harness.state().workspace().is_some());
