@@ -838,9 +838,8 @@ impl ImagePanel {
             }
         }
         if self.overlays.leaf_outlines {
-            let outlines = self.outlines(workspace).to_vec();
             let mut mesh = egui::Mesh::default();
-            for [a, b] in &outlines {
+            for [a, b] in self.outlines(workspace) {
                 let (Some(ua), Some(ub)) = (model.project(image, a), model.project(image, b))
                 else {
                     continue;

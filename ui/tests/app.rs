@@ -117,8 +117,14 @@ fn click(harness: &mut Harness<'static, FrondApp>, uv: [f64; 2]) {
     harness.step();
 }
 
+/// A primary-button drag through image pixels of the photo panel.
 fn drag(harness: &mut Harness<'static, FrondApp>, stroke: &[[f64; 2]]) {
     let points: Vec<Pos2> = stroke.iter().map(|&uv| screen(harness, uv)).collect();
+    drag_screen(harness, &points);
+}
+
+/// A primary-button drag through screen points.
+fn drag_screen(harness: &mut Harness<'static, FrondApp>, points: &[Pos2]) {
     harness.hover_at(points[0]);
     harness.step();
     press(harness, points[0], true);
@@ -457,17 +463,6 @@ fn branches_are_drawn_and_moved_in_the_3d_view() {
     let screen_of = |p: &Point3<f64>| {
         let (uv, _) = camera.project(p).unwrap();
         rect.min + egui::vec2(uv.x as f32, uv.y as f32) / ppp
-    };
-    let drag_screen = |harness: &mut Harness<'static, FrondApp>, points: &[Pos2]| {
-        harness.hover_at(points[0]);
-        harness.step();
-        press(harness, points[0], true);
-        for &p in &points[1..] {
-            harness.hover_at(p);
-            harness.step();
-        }
-        press(harness, points[points.len() - 1], false);
-        harness.step();
     };
 
     // Draw from the stem's middle out to the side.
