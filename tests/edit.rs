@@ -735,6 +735,44 @@ fn a_petiole_drawn_in_a_photo_or_the_3d_view_follows_the_true_one() {
 }
 
 #[test]
+fn a_branch_picked_in_the_3d_view_is_the_one_picked_in_the_photo() {
+    let session = session();
+    let tree = session.branches();
+    assert!(
+        !tree.branches.is_empty(),
+        "the automatic skeleton has branches"
+    );
+    let view = best_view_for(&session, stem_and_petiole().0);
+    let image = &session.scene().reconstruction.images()[view];
+    let mut checked = 0;
+    for branch in &tree.branches {
+        let middle = branch.cylinder.skeleton.point_at_fraction(0.5);
+        let Some(uv) = session.scene().reconstruction.project(image, &middle) else {
+            continue;
+        };
+        let at = PixelRef {
+            image_id: image.id,
+            pixel: [uv.x, uv.y],
+        };
+        let (Ok(in_photo), Ok(in_view)) = (
+            session.pick_branch(&at),
+            session.pick_branch_in_view(&view_camera_of_photo(&session, view), at.pixel),
+        ) else {
+            panic!("branch {} is under its own projected midpoint", branch.id);
+        };
+        assert_eq!(in_photo.branch, in_view.branch);
+        assert!((in_photo.fraction - in_view.fraction).abs() < 1e-9);
+        checked += 1;
+    }
+    assert!(checked > 0);
+    let far = session.pick_branch_in_view(&view_camera_of_photo(&session, 0), [-500.0, -500.0]);
+    assert!(
+        matches!(far, Err(EditError::NothingUnderViewClick { .. })),
+        "{far:?}"
+    );
+}
+
+#[test]
 fn a_main_stem_drawn_on_an_empty_tree_is_the_root() {
     let mut session = session_without_branches();
     let (stem, _) = stem_and_petiole();

@@ -156,14 +156,16 @@ fn branch_mut(tree: &mut BranchTree, id: u32) -> Result<&mut Branch, BranchEditE
 }
 
 /// The branch nearest to a pixel (its centreline projected within `tolerance_px`, widened by
-/// its projected radius).
+/// its projected radius). Among branches the pixel lies on, the one whose centreline is
+/// nearest wins, so a thin branch crossing a thick one is picked on its own axis.
 pub fn pick_branch(
     tree: &BranchTree,
     view: &StrokeView,
     pixel: &Point2<f64>,
     tolerance_px: f64,
 ) -> Option<BranchPoint> {
-    let mut best: Option<(f64, u32, f64)> = None;
+    // (distance outside the projected radius, distance to the centreline, branch, fraction)
+    let mut best: Option<(f64, f64, u32, f64)> = None;
     for branch in &tree.branches {
         let samples = 96;
         let projected: Vec<Option<(Point2<f64>, f64)>> = (0..=samples)
@@ -186,13 +188,16 @@ pub fn pick_branch(
             let radius_px = branch.cylinder.radius_at(fraction)
                 * view.camera.focal_and_principal_point().0
                 / depth_a.max(1e-12);
-            let distance = ((pixel - (a + ab * along)).norm() - radius_px).max(0.0);
-            if distance <= tolerance_px && best.is_none_or(|(d, _, _)| distance < d) {
-                best = Some((distance, branch.id, fraction));
+            let to_axis = (pixel - (a + ab * along)).norm();
+            let distance = (to_axis - radius_px).max(0.0);
+            if distance <= tolerance_px
+                && best.is_none_or(|(d, axis, _, _)| (distance, to_axis) < (d, axis))
+            {
+                best = Some((distance, to_axis, branch.id, fraction));
             }
         }
     }
-    let (distance, id, fraction) = best?;
+    let (distance, _, id, fraction) = best?;
     tree.point_on(id, fraction)
         .map(|point| BranchPoint { distance, ..point })
 }
@@ -619,4 +624,62 @@ pub fn delete_branch(tree: &BranchTree, branch: u32) -> Result<BranchTree, Branc
             .cloned()
             .collect(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn straight(id: u32, parent: Option<u32>, a: [f64; 3], b: [f64; 3], radius: f64) -> Branch {
+        let (a, b) = (Point3::from(a), Point3::from(b));
+        let spline = Spline::new(vec![a, Point3::from((a.coords + b.coords) * 0.5), b]).unwrap();
+        Branch {
+            id,
+            parent,
+            parent_fraction: 0.5,
+            cylinder: GeneralizedCylinder::new(spline, radius, radius),
+            leaf_at_tip: false,
+        }
+    }
+
+    /// A pinhole 400 px wide looking down +z from z = −1 at the plane z = 0 (200 px per
+    /// unit there).
+    fn view() -> StrokeView {
+        StrokeView::from_view_camera(&ViewCamera {
+            rotation: [1.0, 0.0, 0.0, 0.0],
+            translation: [0.0, 0.0, 1.0],
+            focal_px: 200.0,
+            width: 400,
+            height: 400,
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn a_thin_branch_over_a_thick_one_is_picked_on_its_own_axis() {
+        // A thick vertical stem (radius 0.1 = 20 px) and a thin branch crossing it
+        // horizontally at y = 0.25.
+        let tree = BranchTree {
+            branches: vec![
+                straight(0, None, [0.0, -0.5, 0.0], [0.0, 0.5, 0.0], 0.1),
+                straight(1, Some(0), [-0.4, 0.25, 0.0], [0.4, 0.25, 0.0], 0.005),
+            ],
+        };
+        let view = view();
+        let pixel_of = |x: f64, y: f64| Point2::new(200.0 + 200.0 * x, 200.0 + 200.0 * y);
+        // On the thin branch's axis, inside the stem's silhouette: the thin branch.
+        let picked = pick_branch(&tree, &view, &pixel_of(0.05, 0.25), 8.0).unwrap();
+        assert_eq!(picked.branch, 1);
+        assert!(
+            (picked.fraction - (0.45 / 0.8)).abs() < 0.01,
+            "{}",
+            picked.fraction
+        );
+        // Inside the stem away from the thin branch: the stem.
+        let picked = pick_branch(&tree, &view, &pixel_of(0.05, -0.2), 8.0).unwrap();
+        assert_eq!(picked.branch, 0);
+        assert!((picked.fraction - 0.3).abs() < 0.01, "{}", picked.fraction);
+        // Beyond the tolerance from both: nothing.
+        assert!(pick_branch(&tree, &view, &pixel_of(-0.3, -0.3), 8.0).is_none());
+    }
 }

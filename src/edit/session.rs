@@ -8,7 +8,7 @@ use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
 
 use super::branches::{self, BranchEditError, SnapPoints, StrokeView};
-use super::command::{BranchStroke, BranchTarget, Command, PixelRef};
+use super::command::{BranchStroke, BranchTarget, Command, PixelRef, ViewCamera};
 use super::stroke::{Side, Stroke};
 use crate::branch::skeleton::SkeletonStats;
 use crate::branch::{BranchPoint, BranchTree};
@@ -46,6 +46,8 @@ pub enum EditError {
         y: f64,
         tolerance: f64,
     },
+    #[error("no branch lies within {tolerance} px of ({x:.1}, {y:.1}) in the 3D view")]
+    NothingUnderViewClick { x: f64, y: f64, tolerance: f64 },
     #[error("the stroke needs at least two distinct finite points (three if closed)")]
     InvalidStroke,
     #[error("the stroke crosses no segment in image {0}")]
@@ -215,6 +217,23 @@ impl Session {
         branches::pick_branch(&self.branches, &view, &pixel, PICK_TOLERANCE_PX).ok_or(
             EditError::NothingUnderClick {
                 image_id: at.image_id,
+                x: pixel.x,
+                y: pixel.y,
+                tolerance: PICK_TOLERANCE_PX,
+            },
+        )
+    }
+
+    /// The branch under a pixel of the 3D panel's view (its camera as the command carries it).
+    pub fn pick_branch_in_view(
+        &self,
+        camera: &ViewCamera,
+        pixel: [f64; 2],
+    ) -> Result<BranchPoint, EditError> {
+        let view = StrokeView::from_view_camera(camera)?;
+        let pixel = Point2::new(pixel[0], pixel[1]);
+        branches::pick_branch(&self.branches, &view, &pixel, PICK_TOLERANCE_PX).ok_or(
+            EditError::NothingUnderViewClick {
                 x: pixel.x,
                 y: pixel.y,
                 tolerance: PICK_TOLERANCE_PX,

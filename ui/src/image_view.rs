@@ -27,6 +27,9 @@ const PHOTO_TEXTURE_SIZE: u32 = 2048;
 const THUMBNAIL_SIZE: u32 = 160;
 /// Control points and branch ends are grabbed within this distance (screen points).
 const GRAB_DISTANCE: f32 = 12.0;
+/// The colour branches are drawn in.
+const WOOD: Color32 = Color32::from_rgb(235, 150, 60);
+
 /// Stroke samples closer than this to the previous one are skipped (screen points).
 const STROKE_STEP: f32 = 2.0;
 
@@ -102,8 +105,8 @@ impl ViewTransform {
 
 enum Loadable {
     Loading(Receiver<Result<ColorImage, String>>),
-    /// The texture, and its pixels for compositing on the CPU.
-    Ready(TextureHandle, Arc<ColorImage>),
+    /// Its pixels, composed on the CPU into the panel's one texture.
+    Ready(Arc<ColorImage>),
     Failed(String),
 }
 
@@ -194,22 +197,28 @@ pub struct ImagePanel {
     drag: Option<BranchDrag>,
     /// The transform of the last frame drawn.
     pub transform: Option<ViewTransform>,
-    /// The photo as seen at the current zoom and pan with the points splatted on it, composed
-    /// on the CPU into one panel-sized texture (a quad per point, or two full layers, cost far
-    /// more on a software rasteriser), and what it was composed for.
-    points_overlay: Option<(PointsOverlayKey, TextureHandle)>,
+    /// The photo as seen at the current zoom and pan with the gradient image, the points,
+    /// segment boundaries, leaf outlines and branch curves drawn on it, composed on the CPU
+    /// into one panel-sized texture (a quad per point, several full layers or tessellated
+    /// lines by the ten thousand cost far more on a software rasteriser), and what it was
+    /// composed for.
+    composite: Option<(CompositeKey, TextureHandle)>,
 }
 
-/// What the points overlay depends on.
+/// What the composite depends on.
 #[derive(Clone, Copy, Debug, PartialEq)]
-struct PointsOverlayKey {
+struct CompositeKey {
     view: usize,
+    /// The session's revision and the revision the leaves were fitted at.
     revision: u64,
+    leaves: Option<u64>,
     size: [usize; 2],
     center: [u32; 2],
     zoom: u32,
+    overlays: Overlays,
+    /// Whether the photo and the gradient image had arrived.
     photo: bool,
-    points: bool,
+    gradient: bool,
 }
 
 impl Default for ImagePanel {
@@ -232,7 +241,7 @@ impl Default for ImagePanel {
             merge_first: None,
             drag: None,
             transform: None,
-            points_overlay: None,
+            composite: None,
         }
     }
 }
@@ -350,7 +359,7 @@ fn splat_points(
                 *under = if color.a() == 255 {
                     color
                 } else {
-                    color.blend(*under)
+                    under.blend(color)
                 };
             }
         }
@@ -371,6 +380,74 @@ fn add_segment(mesh: &mut egui::Mesh, a: Pos2, b: Pos2, width: f32, color: Color
     }
     mesh.add_triangle(base, base + 1, base + 2);
     mesh.add_triangle(base, base + 2, base + 3);
+}
+
+/// Draws an anti-aliased line `width` texels wide from `a` to `b` (texel coordinates, origin
+/// at the image's corner) into `image`: each texel's coverage is its centre's distance to the
+/// segment against the half width, ±½ texel, and `color` is blended over by coverage.
+fn draw_line(image: &mut ColorImage, a: Vec2, b: Vec2, width: f32, color: Color32) {
+    let [w, h] = image.size;
+    let reach = 0.5 * width + 0.5;
+    let (min, max) = (a.min(b) - Vec2::splat(reach), a.max(b) + Vec2::splat(reach));
+    if !(min.x.is_finite() && min.y.is_finite() && max.x.is_finite() && max.y.is_finite())
+        || max.x < 0.0
+        || max.y < 0.0
+        || min.x >= w as f32
+        || min.y >= h as f32
+    {
+        return;
+    }
+    let ab = b - a;
+    let length_sq = ab.length_sq();
+    let (x0, x1) = (
+        min.x.floor().max(0.0) as usize,
+        (max.x.ceil() as usize).min(w),
+    );
+    let (y0, y1) = (
+        min.y.floor().max(0.0) as usize,
+        (max.y.ceil() as usize).min(h),
+    );
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let p = vec2(x as f32 + 0.5, y as f32 + 0.5);
+            let t = if length_sq > 1e-12 {
+                ((p - a).dot(ab) / length_sq).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let coverage = (reach - (p - (a + ab * t)).length()).clamp(0.0, 1.0);
+            if coverage > 0.0 {
+                let under = &mut image.pixels[y * w + x];
+                *under = under.blend(color.gamma_multiply(coverage));
+            }
+        }
+    }
+}
+
+/// [`draw_line`] through a polyline of screen points (closed: back to the first).
+fn draw_polyline(
+    image: &mut ColorImage,
+    transform: &ViewTransform,
+    pixels_per_point: f32,
+    points: &[Pos2],
+    closed: bool,
+    width_points: f32,
+    color: Color32,
+) {
+    let texel = |p: Pos2| (p - transform.rect.min) * pixels_per_point;
+    let width = width_points * pixels_per_point;
+    for pair in points.windows(2) {
+        draw_line(image, texel(pair[0]), texel(pair[1]), width, color);
+    }
+    if closed && points.len() > 2 {
+        draw_line(
+            image,
+            texel(points[points.len() - 1]),
+            texel(points[0]),
+            width,
+            color,
+        );
+    }
 }
 
 impl ImagePanel {
@@ -417,24 +494,11 @@ impl ImagePanel {
     }
 
     fn poll_loads(&mut self, ctx: &egui::Context) {
-        for (kind, loads) in [
-            ("photo", &mut self.photos),
-            ("gradient", &mut self.gradients),
-        ] {
-            for (view, load) in loads.iter_mut() {
+        for loads in [&mut self.photos, &mut self.gradients] {
+            for load in loads.values_mut() {
                 if let Loadable::Loading(receiver) = load {
                     match receiver.try_recv() {
-                        Ok(Ok(image)) => {
-                            let pixels = Arc::new(image.clone());
-                            *load = Loadable::Ready(
-                                ctx.load_texture(
-                                    format!("{kind}_{view}"),
-                                    image,
-                                    egui::TextureOptions::LINEAR,
-                                ),
-                                pixels,
-                            )
-                        }
+                        Ok(Ok(image)) => *load = Loadable::Ready(Arc::new(image)),
                         Ok(Err(message)) => *load = Loadable::Failed(message),
                         Err(TryRecvError::Empty) => ctx.request_repaint(),
                         Err(TryRecvError::Disconnected) => {
@@ -690,47 +754,34 @@ impl ImagePanel {
             transform.screen_from_image([0.0, 0.0]),
             transform.screen_from_image([size.x as f64, size.y as f64]),
         );
-        let full_uv = Rect::from_min_max(pos2(0.0, 0.0), pos2(1.0, 1.0));
-        // The photo itself is drawn by the composite below (one layer, not two).
-        let photo = match self.photos.get(&view) {
-            Some(Loadable::Ready(_, pixels)) if self.overlays.photo => Some(Arc::clone(pixels)),
+        let ready = |loads: &HashMap<usize, Loadable>| match loads.get(&view) {
+            Some(Loadable::Ready(pixels)) => Some(Arc::clone(pixels)),
             _ => None,
         };
-        if photo.is_none() {
+        let overlays = self.overlays;
+        let photo = ready(&self.photos).filter(|_| overlays.photo);
+        let gradient = ready(&self.gradients).filter(|_| overlays.gradient);
+        if photo.is_none() && gradient.is_none() {
             painter.rect_filled(image_rect, 0.0, Color32::from_gray(40));
         }
-        if self.overlays.photo {
-            match self.photos.get(&view) {
-                Some(Loadable::Ready(..)) => {}
-                Some(Loadable::Failed(message)) => {
-                    painter.text(
-                        image_rect.center(),
-                        egui::Align2::CENTER_CENTER,
-                        format!("photo unavailable: {message}"),
-                        egui::FontId::proportional(14.0),
-                        Color32::from_rgb(230, 160, 80),
-                    );
-                }
-                _ => {
-                    painter.text(
-                        image_rect.center(),
-                        egui::Align2::CENTER_CENTER,
-                        "loading photo …",
-                        egui::FontId::proportional(14.0),
-                        Color32::from_gray(160),
-                    );
-                }
-            }
-        }
-        if self.overlays.gradient
-            && let Some(Loadable::Ready(texture, _)) = self.gradients.get(&view)
-        {
-            let tint = if self.overlays.photo {
-                Color32::from_white_alpha(200)
-            } else {
-                Color32::WHITE
+        if overlays.photo {
+            let message = match self.photos.get(&view) {
+                Some(Loadable::Ready(..)) => None,
+                Some(Loadable::Failed(message)) => Some((
+                    format!("photo unavailable: {message}"),
+                    Color32::from_rgb(230, 160, 80),
+                )),
+                _ => Some(("loading photo …".to_owned(), Color32::from_gray(160))),
             };
-            painter.image(texture.id(), image_rect, full_uv, tint);
+            if let Some((text, color)) = message {
+                painter.text(
+                    image_rect.center(),
+                    egui::Align2::CENTER_CENTER,
+                    text,
+                    egui::FontId::proportional(14.0),
+                    color,
+                );
+            }
         }
 
         let session = &workspace.session;
@@ -742,13 +793,138 @@ impl ImagePanel {
                 .flatten()
                 .map(|s| s.label)
         };
-        let projections = if self.overlays.points || self.overlays.edges {
+        let projections = if overlays.points || overlays.edges {
             Some(self.projections(workspace, view))
         } else {
             None
         };
+        let handles = branch_handles(workspace, view);
+        let pixels_per_point = ui.ctx().pixels_per_point();
+        let key = CompositeKey {
+            view,
+            revision: workspace.revision,
+            leaves: workspace.leaves.as_ref().map(|(revision, _)| *revision),
+            size: [
+                (rect.width() * pixels_per_point).round().max(1.0) as usize,
+                (rect.height() * pixels_per_point).round().max(1.0) as usize,
+            ],
+            center: [self.center.x.to_bits(), self.center.y.to_bits()],
+            zoom: self.zoom.to_bits(),
+            overlays,
+            photo: photo.is_some(),
+            gradient: gradient.is_some(),
+        };
+        let composed = photo.is_some()
+            || gradient.is_some()
+            || overlays.points
+            || (overlays.boundaries && segments.iter().any(Option::is_some))
+            || (overlays.leaf_outlines && workspace.leaves.is_some())
+            || (overlays.branches && !handles.is_empty());
+        if !composed {
+            self.composite = None;
+        } else if self.composite.as_ref().is_none_or(|(k, _)| *k != key) {
+            let mut canvas = match &photo {
+                Some(photo) => resample_photo(photo, size, &transform, key.size, pixels_per_point),
+                None => ColorImage::filled(key.size, Color32::TRANSPARENT),
+            };
+            if let Some(gradient) = &gradient {
+                let grey = resample_photo(gradient, size, &transform, key.size, pixels_per_point);
+                for (under, over) in canvas.pixels.iter_mut().zip(&grey.pixels) {
+                    *under = if photo.is_some() {
+                        under.blend(over.gamma_multiply_u8(200))
+                    } else {
+                        *over
+                    };
+                }
+            }
+            if let Some(projections) = projections.as_ref().filter(|_| overlays.points) {
+                splat_points(
+                    &mut canvas,
+                    projections,
+                    &transform,
+                    pixels_per_point,
+                    |point| {
+                        let segment = segment_of[point as usize];
+                        segment_color(segment, label_of(segment))
+                    },
+                );
+            }
+            let polyline = |canvas: &mut ColorImage, points: &[Pos2], closed, width, color| {
+                draw_polyline(
+                    canvas,
+                    &transform,
+                    pixels_per_point,
+                    points,
+                    closed,
+                    width,
+                    color,
+                );
+            };
+            if overlays.boundaries {
+                for (segment, state) in segments.iter().enumerate() {
+                    let (Some(state), Some(boundary)) =
+                        (state, session.boundary(segment as u32, view))
+                    else {
+                        continue;
+                    };
+                    let points: Vec<Pos2> = boundary
+                        .polygon
+                        .iter()
+                        .map(|&uv| transform.screen_from_image(uv))
+                        .collect();
+                    let color = segment_color(segment as i32, Some(state.label));
+                    polyline(&mut canvas, &points, true, 3.5, Color32::BLACK);
+                    polyline(&mut canvas, &points, true, 2.0, color);
+                }
+            }
+            if overlays.leaf_outlines {
+                for [a, b] in self.outlines(workspace) {
+                    let (Some(ua), Some(ub)) = (model.project(image, a), model.project(image, b))
+                    else {
+                        continue;
+                    };
+                    polyline(
+                        &mut canvas,
+                        &[
+                            transform.screen_from_image([ua.x, ua.y]),
+                            transform.screen_from_image([ub.x, ub.y]),
+                        ],
+                        false,
+                        1.5,
+                        Color32::from_rgb(255, 240, 90),
+                    );
+                }
+            }
+            if overlays.branches {
+                for handle in &handles {
+                    let curve: Vec<Pos2> = handle
+                        .curve
+                        .iter()
+                        .map(|&uv| transform.screen_from_image(uv))
+                        .collect();
+                    polyline(&mut canvas, &curve, false, 4.0, Color32::BLACK);
+                    polyline(&mut canvas, &curve, false, 2.0, WOOD);
+                }
+            }
+            let texture =
+                ui.ctx()
+                    .load_texture("photo_view", canvas, egui::TextureOptions::NEAREST);
+            self.composite = Some((key, texture));
+        }
+        // Only the photo's part of the panel is drawn (the rest is transparent): fewer
+        // fragments for a software rasteriser.
+        let shown = image_rect.intersect(rect);
+        if let Some((_, texture)) = &self.composite
+            && shown.is_positive()
+        {
+            let uv = Rect::from_min_max(
+                ((shown.min - rect.min) / rect.size()).to_pos2(),
+                ((shown.max - rect.min) / rect.size()).to_pos2(),
+            );
+            painter.image(texture.id(), shown, uv, Color32::WHITE);
+        }
         let visible = rect.expand(4.0);
-        if self.overlays.edges
+        if overlays.edges
             && let Some(projections) = &projections
         {
             let segmentation = session.segmentation();
@@ -766,7 +942,7 @@ impl ImagePanel {
                 if !visible.contains(pa) && !visible.contains(pb) {
                     continue;
                 }
-                // Kept edges bright, edges the partition cut dark.
+                // Kept edges bright, edges the partition cut red.
                 let color = if edge.weight > 0.0 {
                     Color32::from_rgba_unmultiplied(230, 230, 230, 110)
                 } else {
@@ -776,87 +952,8 @@ impl ImagePanel {
             }
             painter.add(Shape::mesh(mesh));
         }
-        if photo.is_some() || self.overlays.points {
-            let pixels_per_point = ui.ctx().pixels_per_point();
-            let key = PointsOverlayKey {
-                view,
-                revision: workspace.revision,
-                size: [
-                    (rect.width() * pixels_per_point).round().max(1.0) as usize,
-                    (rect.height() * pixels_per_point).round().max(1.0) as usize,
-                ],
-                center: [self.center.x.to_bits(), self.center.y.to_bits()],
-                zoom: self.zoom.to_bits(),
-                photo: photo.is_some(),
-                points: self.overlays.points,
-            };
-            if self.points_overlay.as_ref().is_none_or(|(k, _)| *k != key) {
-                let mut image = match &photo {
-                    Some(photo) => {
-                        resample_photo(photo, size, &transform, key.size, pixels_per_point)
-                    }
-                    None => ColorImage::filled(key.size, Color32::TRANSPARENT),
-                };
-                if let Some(projections) = projections.as_ref().filter(|_| self.overlays.points) {
-                    splat_points(
-                        &mut image,
-                        projections,
-                        &transform,
-                        pixels_per_point,
-                        |point| {
-                            let segment = segment_of[point as usize];
-                            segment_color(segment, label_of(segment))
-                        },
-                    );
-                }
-                let texture =
-                    ui.ctx()
-                        .load_texture("photo_view", image, egui::TextureOptions::NEAREST);
-                self.points_overlay = Some((key, texture));
-            }
-            if let Some((_, texture)) = &self.points_overlay {
-                painter.image(texture.id(), rect, full_uv, Color32::WHITE);
-            }
-        }
-        if self.overlays.boundaries {
-            for (segment, state) in segments.iter().enumerate() {
-                let (Some(state), Some(boundary)) = (state, session.boundary(segment as u32, view))
-                else {
-                    continue;
-                };
-                let points: Vec<Pos2> = boundary
-                    .polygon
-                    .iter()
-                    .map(|&uv| transform.screen_from_image(uv))
-                    .collect();
-                let color = segment_color(segment as i32, Some(state.label));
-                painter.add(Shape::closed_line(
-                    points.clone(),
-                    Stroke::new(3.5, Color32::BLACK),
-                ));
-                painter.add(Shape::closed_line(points, Stroke::new(2.0, color)));
-            }
-        }
-        if self.overlays.leaf_outlines {
-            let mut mesh = egui::Mesh::default();
-            for [a, b] in self.outlines(workspace) {
-                let (Some(ua), Some(ub)) = (model.project(image, a), model.project(image, b))
-                else {
-                    continue;
-                };
-                add_segment(
-                    &mut mesh,
-                    transform.screen_from_image([ua.x, ua.y]),
-                    transform.screen_from_image([ub.x, ub.y]),
-                    1.5,
-                    Color32::from_rgb(255, 240, 90),
-                );
-            }
-            painter.add(Shape::mesh(mesh));
-        }
-        let handles = branch_handles(workspace, view);
-        if self.overlays.branches {
-            draw_branches(&painter, workspace, view, &transform, &handles, tool);
+        if overlays.branches {
+            draw_branch_handles(&painter, &transform, &handles, tool);
         }
 
         // Tools.
@@ -1145,16 +1242,14 @@ fn branch_handles(workspace: &Workspace, view: usize) -> Vec<BranchHandles> {
         .collect()
 }
 
-fn draw_branches(
+/// What goes over the composite for branches: the leaf-at-tip marks, and the handles while a
+/// branch tool is active (the curves are in the composite).
+fn draw_branch_handles(
     painter: &egui::Painter,
-    workspace: &Workspace,
-    view: usize,
     transform: &ViewTransform,
     handles: &[BranchHandles],
     tool: Tool,
 ) {
-    let _ = (workspace, view);
-    let wood = Color32::from_rgb(235, 150, 60);
     // Handles (radius circles, control points, ids) only while a branch tool is active: a
     // plant with a hundred branches is otherwise cluttered, and slow on a software rasteriser.
     let show_handles = matches!(
@@ -1162,13 +1257,6 @@ fn draw_branches(
         Tool::MoveBranch | Tool::Radius | Tool::DrawBranch | Tool::LeafAtTip | Tool::DeleteBranch
     );
     for handle in handles {
-        let curve: Vec<Pos2> = handle
-            .curve
-            .iter()
-            .map(|&uv| transform.screen_from_image(uv))
-            .collect();
-        painter.add(Shape::line(curve.clone(), Stroke::new(4.0, Color32::BLACK)));
-        painter.add(Shape::line(curve, Stroke::new(2.0, wood)));
         for (uv, radius_px, _) in handle.ends.iter().flatten().filter(|_| show_handles) {
             let c = transform.screen_from_image(*uv);
             painter.circle_stroke(
@@ -1194,7 +1282,7 @@ fn draw_branches(
                 painter.rect_stroke(
                     square,
                     0.0,
-                    Stroke::new(1.5, wood),
+                    Stroke::new(1.5, WOOD),
                     egui::StrokeKind::Inside,
                 );
             }
@@ -1311,6 +1399,75 @@ mod tests {
             .filter(|c| **c != Color32::TRANSPARENT)
             .count();
         assert!(covered > 0 && covered <= 2 * 4 * 4, "{covered}");
+
+        // A translucent point tints an opaque photo (it is blended over, not under).
+        let mut photo = ColorImage::filled([200, 160], Color32::from_gray(200));
+        let grey = Color32::from_rgba_unmultiplied(0, 0, 255, 110);
+        splat_points(&mut photo, &projections[..1], &transform, 2.0, |_| grey);
+        let tinted = photo.pixels[41 * 200 + 21];
+        assert!(tinted.b() > tinted.r() && tinted.a() == 255, "{tinted:?}");
+    }
+
+    #[test]
+    fn lines_cover_their_width_with_soft_edges_and_nothing_else() {
+        let mut image = ColorImage::filled([40, 20], Color32::TRANSPARENT);
+        // A horizontal line 3 texels wide along y = 10.
+        draw_line(
+            &mut image,
+            vec2(5.0, 10.0),
+            vec2(35.0, 10.0),
+            3.0,
+            Color32::RED,
+        );
+        let at = |x: usize, y: usize| image.pixels[y * 40 + x];
+        for y in 9..=10 {
+            assert_eq!(at(20, y), Color32::RED, "row {y}");
+        }
+        // Texel centres 1.5 from the axis: half covered; 2.5 away: untouched.
+        assert!(
+            at(20, 8).a() > 100 && at(20, 8).a() < 160,
+            "{:?}",
+            at(20, 8)
+        );
+        assert_eq!(at(20, 7), Color32::TRANSPARENT);
+        assert_eq!(at(20, 12), Color32::TRANSPARENT);
+        assert_eq!(at(38, 10), Color32::TRANSPARENT);
+        let covered = image.pixels.iter().filter(|c| c.a() > 0).count();
+        assert!((120..=140).contains(&covered), "{covered}");
+
+        // Off the image, degenerate or not finite: nothing drawn, no panic.
+        let before = image.pixels.clone();
+        draw_line(
+            &mut image,
+            vec2(-50.0, -5.0),
+            vec2(-10.0, -5.0),
+            3.0,
+            Color32::GREEN,
+        );
+        draw_line(
+            &mut image,
+            vec2(f32::NAN, 1.0),
+            vec2(3.0, 3.0),
+            3.0,
+            Color32::GREEN,
+        );
+        draw_line(
+            &mut image,
+            vec2(100.0, 1.0),
+            vec2(300.0, 3.0),
+            3.0,
+            Color32::GREEN,
+        );
+        assert_eq!(image.pixels, before);
+        // A zero-length line is a dot.
+        draw_line(
+            &mut image,
+            vec2(2.5, 2.5),
+            vec2(2.5, 2.5),
+            2.0,
+            Color32::GREEN,
+        );
+        assert_eq!(image.pixels[2 * 40 + 2], Color32::GREEN);
     }
 
     #[test]

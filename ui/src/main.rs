@@ -24,6 +24,11 @@ struct Args {
     /// What the central area shows: photo, 3d or both.
     #[arg(long, value_name = "LAYOUT", default_value = "both")]
     layout: String,
+    /// Photo overlays to hide at start, comma-separated menu names in lower case with
+    /// dashes (photo, points-by-segment, graph-edges, gradient-image, segment-boundaries,
+    /// leaf-outlines, branches); the View menu turns them back on.
+    #[arg(long, value_name = "OVERLAYS", value_delimiter = ',')]
+    hide: Vec<String>,
     /// Where the benchmark's JSON goes (also printed).
     #[arg(long, value_name = "FILE", requires = "benchmark_frames")]
     benchmark_out: Option<PathBuf>,
@@ -37,6 +42,15 @@ fn main() -> Result<()> {
         "both" => frond_ui::CentralLayout::Both,
         other => anyhow::bail!("--layout {other}: expected photo, 3d or both"),
     };
+    let names: Vec<String> = frond_ui::image_view::Overlays::default()
+        .toggles()
+        .iter()
+        .map(|(menu, _)| overlay_flag(menu))
+        .collect();
+    let hidden = args.hide.clone();
+    if let Some(unknown) = hidden.iter().find(|h| !names.contains(h)) {
+        anyhow::bail!("--hide {unknown}: expected some of {}", names.join(", "));
+    }
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
@@ -47,6 +61,9 @@ fn main() -> Result<()> {
         viewport: egui::ViewportBuilder::default()
             .with_inner_size([1280.0, 800.0])
             .with_title("Frond"),
+        // The UI is flat colours and the photo panel 8-bit already: dithering adds a noise
+        // term to every fragment of every frame for no visible gain (a cost on llvmpipe).
+        dithering: false,
         ..Default::default()
     };
     eframe::run_native(
@@ -55,6 +72,17 @@ fn main() -> Result<()> {
         Box::new(move |cc| {
             let mut app = frond_ui::FrondApp::new(args.path);
             app.layout = layout;
+            for name in &hidden {
+                if let Some((_, shown)) = app
+                    .panel
+                    .overlays
+                    .toggles()
+                    .into_iter()
+                    .find(|(menu, _)| overlay_flag(menu) == *name)
+                {
+                    *shown = false;
+                }
+            }
             if let Some(frames) = args.benchmark_frames {
                 app.benchmark = Some(frond_ui::Benchmark::new(
                     frames,
@@ -71,4 +99,9 @@ fn main() -> Result<()> {
         }),
     )
     .map_err(|e| anyhow::anyhow!("could not start the GUI: {e}"))
+}
+
+/// An overlay's menu name as a flag value: "Points by segment" → "points-by-segment".
+fn overlay_flag(menu: &str) -> String {
+    menu.to_lowercase().replace(' ', "-")
 }

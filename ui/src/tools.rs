@@ -135,9 +135,15 @@ impl Tool {
             Tool::MoveBranch => {
                 "Drag a control point of a branch (squares in a photo), in a photo or the 3D view; children follow."
             }
-            Tool::Radius => "Drag out from a branch end (circle) to set its radius.",
-            Tool::LeafAtTip => "Click a branch to add or remove a leaf at its tip.",
-            Tool::DeleteBranch => "Click a branch to delete it and everything growing from it.",
+            Tool::Radius => {
+                "Drag out from a branch end (its circle in a photo, its sphere in the 3D view) to set its radius."
+            }
+            Tool::LeafAtTip => {
+                "Click a branch, in a photo or the 3D view, to add or remove a leaf at its tip."
+            }
+            Tool::DeleteBranch => {
+                "Click a branch, in a photo or the 3D view, to delete it and everything growing from it."
+            }
         }
     }
 

@@ -20,7 +20,7 @@ use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaterni
 use crate::image_view::{Action, segment_color};
 use crate::tools::Tool;
 use crate::workspace::Workspace;
-use frond::edit::{BranchStroke, BranchTarget, Command, ViewCamera as EditCamera};
+use frond::edit::{BranchEnd, BranchStroke, BranchTarget, Command, ViewCamera as EditCamera};
 
 /// Side of the palette texture: colour `k` is texel `(k mod side, k div side)`.
 const PALETTE_SIDE: u32 = 64;
@@ -32,8 +32,8 @@ const UNASSIGNED: u32 = 3;
 const FIRST_SEGMENT: u32 = 4;
 /// What each palette mesh is, in `SceneData::palette_meshes` order.
 const PALETTE_PARTS: [Part; 4] = [
-    Part::CoarsePoints,
-    Part::DetailPoints,
+    Part::MovingPoints,
+    Part::Points,
     Part::Branches,
     Part::Handles,
 ];
@@ -41,10 +41,10 @@ const PALETTE_PARTS: [Part; 4] = [
 /// A part of the 3D scene, for showing and hiding.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Part {
-    /// The points drawn while the view moves.
-    CoarsePoints,
-    /// The other points.
-    DetailPoints,
+    /// A quarter of the points as tetrahedra, drawn while the view moves.
+    MovingPoints,
+    /// Every point as an octahedron, drawn once the view is still.
+    Points,
     Branches,
     /// Radius spheres and camera frusta.
     Handles,
@@ -84,8 +84,8 @@ impl Show3d {
 
     fn shows(&self, part: Part, moving: bool) -> bool {
         match part {
-            Part::CoarsePoints => self.points,
-            Part::DetailPoints => self.points && !moving,
+            Part::MovingPoints => self.points && moving,
+            Part::Points => self.points && !moving,
             Part::Branches => self.branches,
             Part::Handles => self.handles,
             Part::Leaf => self.leaves,
@@ -225,8 +225,9 @@ pub struct SceneData {
     /// Changes whenever the content does (workspace revision and fit).
     pub key: (u64, u64),
     pub palette: RgbaImage,
-    /// Meshes drawn with the palette: points drawn while moving, the other points, branches,
-    /// and handles with frusta.
+    /// Meshes drawn with the palette: a quarter of the points as tetrahedra (drawn while the
+    /// view moves), every point as an octahedron (once it is still), branches, and handles
+    /// with frusta.
     pub palette_meshes: Vec<TriMesh>,
     /// Fitted leaves with their textures.
     pub leaves: Vec<(TriMesh, RgbaImage)>,
@@ -267,6 +268,29 @@ fn add_octahedron(mesh: &mut TriMesh, p: &Point3<f64>, r: f64, colour: u32) {
         (3, 1, 5),
         (0, 3, 5),
     ] {
+        mesh.triangles.push([base + a, base + b, base + c]);
+    }
+}
+
+/// A regular tetrahedron of circumradius `r` about `p` (half an octahedron's triangles: the
+/// points drawn while the view moves, when triangle setup is most of a software rasteriser's
+/// work), coloured by palette entry `colour`.
+fn add_tetrahedron(mesh: &mut TriMesh, p: &Point3<f64>, r: f64, colour: u32) {
+    let base = mesh.positions.len() as u32;
+    let uv = palette_uv(colour);
+    for corner in [
+        Vector3::new(1.0, 1.0, 1.0),
+        Vector3::new(1.0, -1.0, -1.0),
+        Vector3::new(-1.0, 1.0, -1.0),
+        Vector3::new(-1.0, -1.0, 1.0),
+    ] {
+        let direction = corner / 3f64.sqrt();
+        mesh.positions.push((p + direction * r).cast::<f32>());
+        mesh.normals.push(direction.cast::<f32>());
+        mesh.uvs.push(uv);
+    }
+    // Counter-clockwise seen from outside, as the octahedron's.
+    for (a, b, c) in [(1, 3, 2), (0, 2, 3), (0, 3, 1), (0, 1, 2)] {
         mesh.triangles.push([base + a, base + b, base + c]);
     }
 }
@@ -322,10 +346,10 @@ impl SceneData {
             }
         }
 
-        // Points: small octahedra, background points left out. A fixed quarter of them (by a
-        // hash of the index) is drawn while the view moves, the rest only once it stops.
+        // Points: small octahedra once the view is still, a quarter of them as tetrahedra
+        // while it moves; background points left out.
+        let mut moving = TriMesh::default();
         let mut points = TriMesh::default();
-        let mut detail = TriMesh::default();
         let point_radius = extent * 0.0035;
         let mut shown = 0;
         for (index, (p, (&segment, class))) in segmentation
@@ -348,13 +372,11 @@ impl SceneData {
             } else {
                 UNASSIGNED
             };
-            let coarse = (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 62 == 0;
-            add_octahedron(
-                if coarse { &mut points } else { &mut detail },
-                p,
-                point_radius,
-                colour,
-            );
+            // A fixed quarter of the points (by an index hash) while the view moves.
+            if (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 62 == 0 {
+                add_tetrahedron(&mut moving, p, point_radius, colour);
+            }
+            add_octahedron(&mut points, p, point_radius, colour);
             shown += 1;
         }
 
@@ -427,7 +449,7 @@ impl SceneData {
                 workspace.leaves.as_ref().map_or(u64::MAX, |(r, _)| *r),
             ),
             palette,
-            palette_meshes: vec![points, detail, branches, handles],
+            palette_meshes: vec![moving, points, branches, handles],
             leaves,
             points: shown,
         }
@@ -731,9 +753,25 @@ pub struct View3d {
     moved_at: Option<std::time::Instant>,
     /// The panel's rectangle in the last frame.
     pub rect: Option<egui::Rect>,
-    /// A branch stroke being drawn (pixels of this view) and a grabbed control point.
+    /// A branch stroke being drawn (pixels of this view) and a grabbed handle.
     stroke: Vec<[f64; 2]>,
-    grabbed: Option<(u32, usize)>,
+    grabbed: Option<Grab>,
+}
+
+/// A handle held during a drag in the 3D view.
+#[derive(Clone, Copy, Debug)]
+enum Grab {
+    ControlPoint {
+        branch: u32,
+        control_point: usize,
+    },
+    /// A branch end: its centre (pixels of this view) and pixels per metre at its depth.
+    Radius {
+        branch: u32,
+        end: BranchEnd,
+        centre: [f64; 2],
+        px_per_metre: f64,
+    },
 }
 
 impl View3d {
@@ -743,6 +781,21 @@ impl View3d {
             show: self.show,
             ..Self::default()
         };
+    }
+
+    /// Triangles of the last content built, by part: points drawn while moving, points drawn
+    /// once still, branches, handles and frusta, leaves.
+    pub fn triangle_counts(&self) -> Option<[usize; 5]> {
+        let data = self.data.as_ref()?;
+        let meshes = &data.palette_meshes;
+        let count = |k: usize| meshes.get(k).map_or(0, |m| m.triangles.len());
+        Some([
+            count(0),
+            count(1),
+            count(2),
+            count(3),
+            data.leaves.iter().map(|(m, _)| m.triangles.len()).sum(),
+        ])
     }
 
     /// The content drawn, rebuilt when the workspace changed.
@@ -767,10 +820,9 @@ impl View3d {
         }
     }
 
-    /// Draws the panel; `gpu` says whether the render core is installed in the window.
     /// Draws the panel; `gpu` says whether the render core is installed in the window. The
-    /// branch tools Draw and Move work here too (their strokes are pixels of this view's
-    /// camera); any other tool orbits with the primary button.
+    /// branch tools work here too (strokes and clicks are pixels of this view's camera);
+    /// with any other tool the primary button orbits.
     pub fn ui(
         &mut self,
         ui: &mut egui::Ui,
@@ -792,8 +844,8 @@ impl View3d {
             );
             return actions;
         };
-        let branch_tool = matches!(tool, Tool::DrawBranch | Tool::MoveBranch);
-        if response.dragged_by(egui::PointerButton::Primary) && !branch_tool {
+        let drag_tool = matches!(tool, Tool::DrawBranch | Tool::MoveBranch | Tool::Radius);
+        if response.dragged_by(egui::PointerButton::Primary) && !drag_tool {
             orbit.rotate(response.drag_delta());
         }
         if response.dragged_by(egui::PointerButton::Secondary)
@@ -814,7 +866,14 @@ impl View3d {
         let Some(orbit) = self.orbit else {
             return actions;
         };
-        if branch_tool {
+        if matches!(
+            tool,
+            Tool::DrawBranch
+                | Tool::MoveBranch
+                | Tool::Radius
+                | Tool::LeafAtTip
+                | Tool::DeleteBranch
+        ) {
             actions.extend(self.branch_tool(ui, &response, workspace, &orbit, tool));
         }
         if self.last_orbit != Some(orbit) {
@@ -878,6 +937,13 @@ impl View3d {
                 .collect();
             painter.add(egui::Shape::line(points, egui::Stroke::new(2.0, accent)));
         }
+        if let (Some(Grab::Radius { centre, .. }), Some(hover)) =
+            (self.grabbed, response.hover_pos())
+        {
+            let accent = ui.visuals().selection.stroke.color;
+            let c = rect.min + egui::vec2(centre[0] as f32, centre[1] as f32) / pixels_per_point;
+            painter.circle_stroke(c, (hover - c).length(), egui::Stroke::new(2.0, accent));
+        }
         actions
     }
 
@@ -898,7 +964,8 @@ impl View3d {
         })
     }
 
-    /// Draw and Move in the 3D view.
+    /// The branch tools in the 3D view: Draw (stroke), Move and Radius (drag a handle), Leaf
+    /// at tip and Delete (click a branch).
     fn branch_tool(
         &mut self,
         ui: &egui::Ui,
@@ -917,6 +984,28 @@ impl View3d {
         let Some(camera) = self.edit_camera(orbit, pixels_per_point) else {
             return Vec::new();
         };
+        let session = &workspace.session;
+        if matches!(tool, Tool::LeafAtTip | Tool::DeleteBranch) {
+            let Some(p) = response
+                .interact_pointer_pos()
+                .filter(|_| response.clicked())
+            else {
+                return Vec::new();
+            };
+            return vec![match session.pick_branch_in_view(&camera, to_pixel(p)) {
+                Ok(point) if tool == Tool::DeleteBranch => Action::Apply(Command::DeleteBranch {
+                    branch: point.branch,
+                }),
+                Ok(point) => Action::Apply(Command::SetLeafAtTip {
+                    branch: point.branch,
+                    enabled: session
+                        .branches()
+                        .get(point.branch)
+                        .is_some_and(|b| !b.leaf_at_tip),
+                }),
+                Err(e) => Action::Message(e.to_string()),
+            }];
+        }
         let press_origin = ui.input(|i| i.pointer.press_origin());
         let pointer = response.interact_pointer_pos();
         if response.drag_started_by(primary)
@@ -926,25 +1015,21 @@ impl View3d {
                 self.stroke = vec![to_pixel(origin)];
             } else {
                 let view = orbit.view_camera(camera.width, camera.height);
-                let target = to_pixel(origin);
-                let mut best: Option<(f64, u32, usize)> = None;
-                for branch in &workspace.session.branches().branches {
-                    for (k, p) in branch.cylinder.skeleton.control_points().iter().enumerate() {
-                        let Some((uv, _)) = view.project(p) else {
-                            continue;
-                        };
-                        let d = (uv.x - target[0]).hypot(uv.y - target[1]);
-                        if d <= GRAB_DISTANCE_PX * pixels_per_point as f64
-                            && best.is_none_or(|(b, _, _)| d < b)
-                        {
-                            best = Some((d, branch.id, k));
-                        }
-                    }
-                }
-                self.grabbed = best.map(|(_, branch, k)| (branch, k));
+                self.grabbed = grab_handle(
+                    workspace,
+                    &view,
+                    to_pixel(origin),
+                    GRAB_DISTANCE_PX * pixels_per_point as f64,
+                    tool,
+                );
                 if self.grabbed.is_none() {
                     return vec![Action::Message(
-                        "no control point there: press on a branch's control point".into(),
+                        if tool == Tool::MoveBranch {
+                            "no control point there: press on a branch's control point"
+                        } else {
+                            "no branch end there: press on an end's sphere or its rim"
+                        }
+                        .into(),
                     )];
                 }
             }
@@ -966,20 +1051,91 @@ impl View3d {
                         radius: None,
                     })];
                 }
-            } else if let (Some((branch, control_point)), Some(p)) = (self.grabbed.take(), pointer)
-            {
-                return vec![Action::Apply(Command::MoveBranch {
-                    branch,
-                    control_point,
-                    to: BranchTarget::View {
-                        camera,
-                        pixel: to_pixel(p),
+            } else if let (Some(grab), Some(p)) = (self.grabbed.take(), pointer) {
+                let pixel = to_pixel(p);
+                return vec![Action::Apply(match grab {
+                    Grab::ControlPoint {
+                        branch,
+                        control_point,
+                    } => Command::MoveBranch {
+                        branch,
+                        control_point,
+                        to: BranchTarget::View { camera, pixel },
+                    },
+                    Grab::Radius {
+                        branch,
+                        end,
+                        centre,
+                        px_per_metre,
+                    } => Command::SetRadius {
+                        branch,
+                        end,
+                        radius: (pixel[0] - centre[0]).hypot(pixel[1] - centre[1]) / px_per_metre,
                     },
                 })];
             }
         }
         Vec::new()
     }
+}
+
+/// The handle nearest to `target` (pixels of `view`) within `tolerance`: a control point
+/// (Move) or a branch end, on its projected radius or inside it (Radius).
+fn grab_handle(
+    workspace: &Workspace,
+    view: &ViewCamera,
+    target: [f64; 2],
+    tolerance: f64,
+    tool: Tool,
+) -> Option<Grab> {
+    let mut best: Option<(f64, Grab)> = None;
+    let mut consider = |distance: f64, grab: Grab| {
+        if distance <= tolerance && best.is_none_or(|(d, _)| distance < d) {
+            best = Some((distance, grab));
+        }
+    };
+    for branch in &workspace.session.branches().branches {
+        let controls = branch.cylinder.skeleton.control_points();
+        if tool == Tool::MoveBranch {
+            for (control_point, p) in controls.iter().enumerate() {
+                if let Some((uv, _)) = view.project(p) {
+                    consider(
+                        (uv.x - target[0]).hypot(uv.y - target[1]),
+                        Grab::ControlPoint {
+                            branch: branch.id,
+                            control_point,
+                        },
+                    );
+                }
+            }
+            continue;
+        }
+        let ends = [
+            (
+                BranchEnd::Start,
+                controls.first(),
+                branch.cylinder.radius_start,
+            ),
+            (BranchEnd::End, controls.last(), branch.cylinder.radius_end),
+        ];
+        for (end, p, radius) in ends {
+            let Some((uv, depth)) = p.and_then(|p| view.project(p)) else {
+                continue;
+            };
+            let px_per_metre = view.fx / depth;
+            let from_centre = (uv.x - target[0]).hypot(uv.y - target[1]);
+            consider(
+                (from_centre - radius * px_per_metre).abs().min(from_centre),
+                Grab::Radius {
+                    branch: branch.id,
+                    end,
+                    centre: [uv.x, uv.y],
+                    px_per_metre,
+                },
+            );
+        }
+    }
+    best.map(|(_, grab)| grab)
 }
 
 #[cfg(test)]
@@ -1060,5 +1216,37 @@ mod tests {
             }
         }
         assert!(edges.values().all(|&n| n == 2));
+    }
+
+    /// Closed, every face wound counter-clockwise seen from outside (as the renderer's front
+    /// faces), every vertex at the radius.
+    fn assert_closed_and_outward(mesh: &TriMesh, centre: &Point3<f64>, radius: f64) {
+        let mut edges = std::collections::HashMap::new();
+        for t in &mesh.triangles {
+            for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+                *edges.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+            }
+            let [a, b, c] = t.map(|i| mesh.positions[i as usize].cast::<f64>());
+            let normal = (b - a).cross(&(c - a));
+            let outward = Point3::from((a.coords + b.coords + c.coords) / 3.0) - centre;
+            assert!(normal.dot(&outward) > 0.0, "{t:?} faces inwards");
+        }
+        assert!(edges.values().all(|&n| n == 2));
+        for p in &mesh.positions {
+            assert!(((p.cast::<f64>() - centre).norm() - radius).abs() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn point_markers_are_closed_and_face_outwards() {
+        let centre = Point3::new(0.5, -1.0, 2.0);
+        let mut octahedron = TriMesh::default();
+        add_octahedron(&mut octahedron, &centre, 0.25, 9);
+        assert_closed_and_outward(&octahedron, &centre, 0.25);
+        let mut tetrahedron = TriMesh::default();
+        add_tetrahedron(&mut tetrahedron, &centre, 0.25, 9);
+        assert_eq!(tetrahedron.triangles.len(), 4);
+        assert_closed_and_outward(&tetrahedron, &centre, 0.25);
+        assert!(tetrahedron.uvs.iter().all(|uv| *uv == palette_uv(9)));
     }
 }

@@ -110,6 +110,10 @@ fn press(harness: &mut Harness<'static, FrondApp>, pos: Pos2, pressed: bool) {
 
 fn click(harness: &mut Harness<'static, FrondApp>, uv: [f64; 2]) {
     let pos = screen(harness, uv);
+    click_screen(harness, pos);
+}
+
+fn click_screen(harness: &mut Harness<'static, FrondApp>, pos: Pos2) {
     harness.hover_at(pos);
     harness.step();
     press(harness, pos, true);
@@ -489,6 +493,62 @@ fn branches_are_drawn_and_moved_in_the_3d_view() {
         harness.state().status()
     );
     assert_eq!(history_len(&harness), (2, 2));
+
+    // Drag the tip's radius out to 12 points from its centre.
+    key(&mut harness, Key::R);
+    let (_, depth) = camera
+        .project(&moved.cylinder.skeleton.control_points()[last])
+        .unwrap();
+    drag_screen(
+        &mut harness,
+        &[
+            moved_tip,
+            moved_tip + egui::vec2(6.0, 0.0),
+            moved_tip + egui::vec2(12.0, 0.0),
+        ],
+    );
+    let widened = session(&harness).branches().get(drawn.id).unwrap().clone();
+    let expected = 12.0 * ppp as f64 * depth / camera.fx;
+    assert!(
+        (widened.cylinder.radius_end - expected).abs() < 0.02 * expected,
+        "radius {} instead of {expected}: {:?}",
+        widened.cylinder.radius_end,
+        harness.state().status()
+    );
+    assert_eq!(widened.cylinder.radius_start, moved.cylinder.radius_start);
+
+    // Leaf at tip, then delete, by clicking the branch's outer part in the view.
+    let on_branch = screen_of(&widened.cylinder.skeleton.point_at_fraction(0.8));
+    key(&mut harness, Key::T);
+    click_screen(&mut harness, on_branch);
+    assert!(
+        session(&harness)
+            .branches()
+            .get(drawn.id)
+            .unwrap()
+            .leaf_at_tip,
+        "{:?}",
+        harness.state().status()
+    );
+    key(&mut harness, Key::D);
+    click_screen(&mut harness, on_branch);
+    assert!(
+        session(&harness).branches().get(drawn.id).is_none(),
+        "{:?}",
+        harness.state().status()
+    );
+    assert_eq!(history_len(&harness), (5, 5));
+    // A click on nothing says so and changes nothing.
+    click_screen(&mut harness, rect.left_top() + egui::vec2(3.0, 3.0));
+    assert_eq!(history_len(&harness), (5, 5));
+    assert!(
+        harness
+            .state()
+            .status()
+            .is_some_and(|s| s.text.contains("no branch")),
+        "{:?}",
+        harness.state().status()
+    );
 }
 
 #[test]
@@ -598,15 +658,13 @@ fn fitting_runs_off_thread_can_be_cancelled_and_exports() {
             .iter()
             .all(|(mesh, texture)| { !mesh.triangles.is_empty() && texture.width() > 0 })
     );
-    let [coarse, detail, branches, handles] = &data.palette_meshes[..] else {
+    let [moving, points, branches, handles] = &data.palette_meshes[..] else {
         panic!("four palette meshes expected");
     };
-    assert_eq!(
-        coarse.positions.len() + detail.positions.len(),
-        6 * data.points
-    );
-    // About a quarter of the points are drawn while the view moves.
-    let share = coarse.positions.len() as f64 / (6 * data.points) as f64;
+    // Every point an octahedron once still; about a quarter of them, as tetrahedra, while
+    // the view moves.
+    assert_eq!(points.positions.len(), 6 * data.points);
+    let share = moving.positions.len() as f64 / (4 * data.points) as f64;
     assert!((0.2..0.3).contains(&share), "{share}");
     assert!(data.points > 1000, "{} points", data.points);
     assert!(!branches.triangles.is_empty());
