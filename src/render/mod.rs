@@ -759,28 +759,7 @@ impl Renderer {
                 object_id,
                 message: format!("unknown texture handle {}", texture.0),
             })?;
-        let buffers = (!mesh.is_empty()).then(|| {
-            let vertices = self
-                .device
-                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("vertices"),
-                    contents: &vertex_bytes(mesh),
-                    usage: wgpu::BufferUsages::VERTEX,
-                });
-            let index_data: Vec<u8> = mesh
-                .triangles
-                .iter()
-                .flat_map(|t| t.iter().flat_map(|i| i.to_le_bytes()))
-                .collect();
-            let indices = self
-                .device
-                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("indices"),
-                    contents: &index_data,
-                    usage: wgpu::BufferUsages::INDEX,
-                });
-            (vertices, indices)
-        });
+        let buffers = self.mesh_buffers(mesh);
         let mut uniform = Vec::with_capacity(16);
         for v in [object_id, alpha_test as u32, 0, 0] {
             uniform.extend_from_slice(&v.to_le_bytes());
@@ -821,6 +800,61 @@ impl Renderer {
             visible: true,
         });
         Ok(MeshHandle(scene.meshes.len() - 1))
+    }
+
+    /// Vertex and index buffers of a mesh; `None` for an empty mesh.
+    fn mesh_buffers(&self, mesh: &TriMesh) -> Option<(wgpu::Buffer, wgpu::Buffer)> {
+        use wgpu::util::DeviceExt;
+        (!mesh.is_empty()).then(|| {
+            let vertices = self
+                .device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("vertices"),
+                    contents: &vertex_bytes(mesh),
+                    usage: wgpu::BufferUsages::VERTEX,
+                });
+            let index_data: Vec<u8> = mesh
+                .triangles
+                .iter()
+                .flat_map(|t| t.iter().flat_map(|i| i.to_le_bytes()))
+                .collect();
+            let indices = self
+                .device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("indices"),
+                    contents: &index_data,
+                    usage: wgpu::BufferUsages::INDEX,
+                });
+            (vertices, indices)
+        })
+    }
+
+    /// Replaces the geometry of an uploaded mesh, keeping its texture, object id, alpha test
+    /// and visibility: an edited part of a scene is re-uploaded without the rest (an editor
+    /// changing its points or branches keeps its textured leaves on the GPU).
+    pub fn replace_mesh_geometry(
+        &self,
+        scene: &mut GpuScene,
+        handle: MeshHandle,
+        mesh: &TriMesh,
+    ) -> Result<(), RenderError> {
+        let object_id = u32::try_from(handle.0).unwrap_or(u32::MAX);
+        let Some(old) = scene.meshes.get(handle.0) else {
+            return Err(RenderError::Mesh {
+                object_id,
+                message: format!("unknown mesh handle {}", handle.0),
+            });
+        };
+        mesh.validate()
+            .map_err(|message| RenderError::Mesh { object_id, message })?;
+        if old.is_static {
+            scene.triangles = scene.triangles - old.index_count as usize / 3 + mesh.triangles.len();
+        }
+        let buffers = self.mesh_buffers(mesh);
+        let slot = &mut scene.meshes[handle.0];
+        slot.buffers = buffers;
+        slot.index_count = (mesh.triangles.len() * 3) as u32;
+        Ok(())
     }
 
     fn ensure_targets(&mut self, width: u32, height: u32) {
@@ -1497,6 +1531,67 @@ mod tests {
         assert_eq!(ids(&mut renderer, &scene), [4]);
         scene.set_visible(left, true);
         assert_eq!(ids(&mut renderer, &scene), [3, 4]);
+    }
+
+    #[test]
+    fn replaced_geometry_is_drawn_with_the_same_id_and_texture() {
+        let mut renderer = renderer();
+        let (mut scene, texture) = white_scene(&renderer);
+        let mesh = renderer
+            .add_mesh(
+                &mut scene,
+                &square_at(Point3::new(-0.3, 0.0, 0.0), 0.2),
+                texture,
+                7,
+                false,
+            )
+            .unwrap();
+        let view = camera(160, 120);
+        // Mean column of the pixels showing id 7, and how many there are.
+        let where_drawn = |renderer: &mut Renderer, scene: &GpuScene| {
+            let out = renderer.render(scene, &view, &Lighting::default()).unwrap();
+            let columns: Vec<usize> = out
+                .object_id
+                .iter()
+                .enumerate()
+                .filter(|(_, id)| **id == 7)
+                .map(|(k, _)| k % 160)
+                .collect();
+            let mean = columns.iter().sum::<usize>() as f64 / columns.len().max(1) as f64;
+            (mean, columns.len())
+        };
+        let (left, count) = where_drawn(&mut renderer, &scene);
+        assert!(left < 80.0 && count > 100, "{left} {count}");
+        let moved = square_at(Point3::new(0.3, 0.0, 0.0), 0.2);
+        renderer
+            .replace_mesh_geometry(&mut scene, mesh, &moved)
+            .unwrap();
+        let (right, count_after) = where_drawn(&mut renderer, &scene);
+        assert!(right > 80.0, "{right}");
+        assert!(
+            count_after.abs_diff(count) < count / 10,
+            "{count} {count_after}"
+        );
+        assert_eq!(scene.num_triangles(), 2);
+        // An empty mesh draws nothing; bad input is refused and changes nothing.
+        let mut bad = moved.clone();
+        bad.positions[0].x = f32::NAN;
+        assert!(
+            renderer
+                .replace_mesh_geometry(&mut scene, mesh, &bad)
+                .is_err()
+        );
+        assert!(
+            renderer
+                .replace_mesh_geometry(&mut scene, MeshHandle(9), &moved)
+                .is_err()
+        );
+        assert_eq!(where_drawn(&mut renderer, &scene).1, count_after);
+        renderer
+            .replace_mesh_geometry(&mut scene, mesh, &TriMesh::default())
+            .unwrap();
+        assert_eq!(where_drawn(&mut renderer, &scene).1, 0);
+        assert_eq!(scene.num_triangles(), 0);
     }
 
     #[test]

@@ -203,6 +203,8 @@ pub struct ImagePanel {
     /// lines by the ten thousand cost far more on a software rasteriser), and what it was
     /// composed for.
     composite: Option<(CompositeKey, TextureHandle)>,
+    /// How long the last composition took on the UI thread (ms).
+    pub last_compose_ms: Option<f32>,
 }
 
 /// What the composite depends on.
@@ -242,6 +244,7 @@ impl Default for ImagePanel {
             drag: None,
             transform: None,
             composite: None,
+            last_compose_ms: None,
         }
     }
 }
@@ -823,6 +826,7 @@ impl ImagePanel {
         if !composed {
             self.composite = None;
         } else if self.composite.as_ref().is_none_or(|(k, _)| *k != key) {
+            let started = std::time::Instant::now();
             let mut canvas = match &photo {
                 Some(photo) => resample_photo(photo, size, &transform, key.size, pixels_per_point),
                 None => ColorImage::filled(key.size, Color32::TRANSPARENT),
@@ -910,6 +914,7 @@ impl ImagePanel {
                 ui.ctx()
                     .load_texture("photo_view", canvas, egui::TextureOptions::NEAREST);
             self.composite = Some((key, texture));
+            self.last_compose_ms = Some(started.elapsed().as_secs_f32() * 1000.0);
         }
         // Only the photo's part of the panel is drawn (the rest is transparent): fewer
         // fragments for a software rasteriser.

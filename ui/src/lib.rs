@@ -57,9 +57,12 @@ pub struct Benchmark {
     /// Where the result goes (JSON); printed on stdout as well.
     pub out: Option<PathBuf>,
     fit_started: bool,
-    /// Per phase (orbiting, then still): wall time between frames (ms, vsync waits
-    /// included), whole-frame CPU time as eframe reports it (ms) and UI build time (ms).
-    samples: [Vec<[f32; 3]>; 2],
+    /// Per phase (orbiting, still, then editing: a branch radius changed every frame): wall
+    /// time between frames (ms, vsync waits included), whole-frame CPU time as eframe
+    /// reports it (ms) and UI build time (ms).
+    samples: [Vec<[f32; 3]>; 3],
+    /// Edits applied in the editing phase.
+    edits: usize,
     warmup: usize,
     /// When the orbit stopped (the still phase records once the 3D view has settled).
     stopped_at: Option<Instant>,
@@ -76,6 +79,9 @@ impl Benchmark {
         }
     }
 }
+
+/// Frames of the benchmark's editing phase (at most).
+const EDIT_BENCHMARK_FRAMES: usize = 20;
 
 fn percentile(values: &[f32], q: f64) -> f32 {
     let mut sorted = values.to_vec();
@@ -727,6 +733,18 @@ impl FrondApp {
         }
     }
 
+    /// The last rebuilds after a change (edits, view, overlays), for the debug overlay.
+    fn rebuild_text(&self) -> String {
+        let mut text = String::new();
+        if let Some(ms) = self.panel.last_compose_ms {
+            text += &format!(" · photo composed in {ms:.0} ms");
+        }
+        if let Some(ms) = self.view3d.last_build_ms {
+            text += &format!(" · 3D built in {ms:.0} ms");
+        }
+        text
+    }
+
     fn benchmark_step(&mut self, ctx: &egui::Context, ui_ms: f32) {
         let Some(mut benchmark) = self.benchmark.take() else {
             return;
@@ -752,16 +770,23 @@ impl FrondApp {
             self.fit_leaves();
             return;
         }
-        let phase = usize::from(benchmark.samples[0].len() >= benchmark.frames);
+        let phase = if benchmark.samples[0].len() < benchmark.frames {
+            0
+        } else if benchmark.samples[1].len() < benchmark.frames {
+            1
+        } else {
+            2
+        };
         if phase == 0 {
             if let Some(orbit) = self.view3d.orbit.as_mut() {
                 orbit.rotate(egui::vec2(4.0, 0.0));
             }
-        } else if benchmark
-            .stopped_at
-            .get_or_insert_with(Instant::now)
-            .elapsed()
-            < Duration::from_millis(500)
+        } else if phase == 1
+            && benchmark
+                .stopped_at
+                .get_or_insert_with(Instant::now)
+                .elapsed()
+                < Duration::from_millis(500)
         {
             self.benchmark = Some(benchmark);
             return;
@@ -771,12 +796,40 @@ impl FrondApp {
             self.benchmark = Some(benchmark);
             return;
         }
-        if let Some(&paint) = self.paint_times.back() {
+        // In the editing phase an interval counts once an edit came before it.
+        if let Some(&paint) = self.paint_times.back()
+            && (phase < 2 || benchmark.edits > 0)
+        {
             let interval = ctx.input(|i| i.unstable_dt) * 1000.0;
             benchmark.samples[phase].push([interval, paint, ui_ms]);
         }
+        let edit_frames = benchmark.frames.min(EDIT_BENCHMARK_FRAMES);
+        let first_branch = self
+            .workspace
+            .as_ref()
+            .and_then(|w| w.session.branches().branches.first())
+            .map(|b| (b.id, b.cylinder.radius_end));
         if benchmark.samples[1].len() < benchmark.frames {
             self.benchmark = Some(benchmark);
+            return;
+        }
+        if let Some((branch, radius)) = first_branch
+            && benchmark.samples[2].len() < edit_frames
+        {
+            // Widen and narrow the first branch's tip in turn: each edit rebuilds the 3D
+            // points and branches and recomposes the photo, as any edit does.
+            let factor = if benchmark.edits % 2 == 0 {
+                1.05
+            } else {
+                1.0 / 1.05
+            };
+            benchmark.edits += 1;
+            self.benchmark = Some(benchmark);
+            self.apply(Command::SetRadius {
+                branch,
+                end: frond::edit::BranchEnd::End,
+                radius: radius * factor,
+            });
             return;
         }
         let (points, leaves) = self.workspace.as_ref().map_or((0, 0), |w| {
@@ -806,6 +859,8 @@ impl FrondApp {
             "textured_leaves": leaves,
             "layout": format!("{:?}", self.layout),
             "window": [ctx.content_rect().width(), ctx.content_rect().height()],
+            "photo_compose_ms": self.panel.last_compose_ms,
+            "build_3d_ms": self.view3d.last_build_ms,
             "triangles_3d": self.view3d.triangle_counts().map(|[coarse, detail, branches, handles, leaves]| {
                 serde_json::json!({
                     "points_while_moving": coarse,
@@ -817,6 +872,7 @@ impl FrondApp {
             }),
             "orbiting": phase_report(&benchmark.samples[0]),
             "still": phase_report(&benchmark.samples[1]),
+            "editing": phase_report(&benchmark.samples[2]),
         });
         let text = serde_json::to_string_pretty(&report).unwrap_or_default();
         println!("{text}");
@@ -1347,7 +1403,11 @@ impl FrondApp {
             ui.painter().text(
                 rect.right_top() + egui::vec2(-10.0, 28.0),
                 egui::Align2::RIGHT_TOP,
-                format!("{} · {points} points", self.frame_time_text()),
+                format!(
+                    "{} · {points} points{}",
+                    self.frame_time_text(),
+                    self.rebuild_text()
+                ),
                 egui::FontId::monospace(12.0),
                 Color32::from_gray(200),
             );

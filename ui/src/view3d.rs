@@ -598,17 +598,17 @@ impl View3dResources {
     }
 
     fn upload(&mut self, data: &SceneData) -> Result<(GpuScene, Vec<(Part, MeshHandle)>), String> {
+        let started = std::time::Instant::now();
         let renderer = &self.renderer;
         let mut scene = renderer.new_scene();
         let palette = renderer.add_texture(&mut scene, &data.palette);
         let mut parts = Vec::new();
+        // Every palette mesh gets a slot, empty or not, so that edits can replace it.
         for (k, (mesh, part)) in data.palette_meshes.iter().zip(PALETTE_PARTS).enumerate() {
-            if !mesh.triangles.is_empty() {
-                let handle = renderer
-                    .add_mesh(&mut scene, mesh, palette, k as u32 + 1, false)
-                    .map_err(|e| e.to_string())?;
-                parts.push((part, handle));
-            }
+            let handle = renderer
+                .add_mesh(&mut scene, mesh, palette, k as u32 + 1, false)
+                .map_err(|e| e.to_string())?;
+            parts.push((part, handle));
         }
         for (k, (mesh, texture)) in data.leaves.iter().enumerate() {
             let texture: TextureHandle = renderer.add_cutout_texture(&mut scene, texture);
@@ -617,7 +617,36 @@ impl View3dResources {
                 .map_err(|e| e.to_string())?;
             parts.push((Part::Leaf, handle));
         }
+        tracing::debug!(
+            "3D content uploaded in {:.1} ms",
+            started.elapsed().as_secs_f64() * 1000.0
+        );
         Ok((scene, parts))
+    }
+
+    /// Brings the uploaded scene up to `data`: when only the palette meshes changed (points,
+    /// branches, handles: an edit), their geometry is replaced and the textured leaves stay;
+    /// otherwise (a new fit, a first upload) everything is uploaded.
+    fn update(&mut self, data: &SceneData) -> Result<(), String> {
+        if let Some((key, scene, parts)) = self.scene.as_mut()
+            && key.1 == data.key.1
+        {
+            let started = std::time::Instant::now();
+            for (&(_, handle), mesh) in parts.iter().zip(&data.palette_meshes) {
+                self.renderer
+                    .replace_mesh_geometry(scene, handle, mesh)
+                    .map_err(|e| e.to_string())?;
+            }
+            *key = data.key;
+            tracing::debug!(
+                "3D points and branches re-uploaded in {:.1} ms",
+                started.elapsed().as_secs_f64() * 1000.0
+            );
+            return Ok(());
+        }
+        let (scene, parts) = self.upload(data)?;
+        self.scene = Some((data.key, scene, parts));
+        Ok(())
     }
 }
 
@@ -662,12 +691,10 @@ impl CallbackTrait for View3dCallback {
             .as_ref()
             .is_none_or(|(key, _, _)| *key != self.data.key)
         {
-            match resources.upload(&self.data) {
-                Ok((scene, parts)) => resources.scene = Some((self.data.key, scene, parts)),
-                Err(e) => {
-                    tracing::warn!("3D panel: {e}");
-                    return Vec::new();
-                }
+            if let Err(e) = resources.update(&self.data) {
+                resources.scene = None;
+                tracing::warn!("3D panel: {e}");
+                return Vec::new();
             }
             resources.frame_key = None;
         }
@@ -753,6 +780,8 @@ pub struct View3d {
     moved_at: Option<std::time::Instant>,
     /// The panel's rectangle in the last frame.
     pub rect: Option<egui::Rect>,
+    /// How long the last content build took on the UI thread (ms).
+    pub last_build_ms: Option<f32>,
     /// A branch stroke being drawn (pixels of this view) and a grabbed handle.
     stroke: Vec<[f64; 2]>,
     grabbed: Option<Grab>,
@@ -813,7 +842,9 @@ impl View3d {
         match &self.data {
             Some(data) if data.key == key => Arc::clone(data),
             _ => {
+                let started = std::time::Instant::now();
                 let data = Arc::new(SceneData::build(workspace, self.extent));
+                self.last_build_ms = Some(started.elapsed().as_secs_f32() * 1000.0);
                 self.data = Some(Arc::clone(&data));
                 data
             }
