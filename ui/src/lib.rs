@@ -128,6 +128,8 @@ enum Dialog {
     Export {
         path: String,
     },
+    /// The window is closing with unsaved edits.
+    ConfirmClose,
 }
 
 /// The application state.
@@ -149,6 +151,11 @@ pub struct FrondApp {
     pub side_tab: SideTab,
     status: Option<Status>,
     dialog: Option<Dialog>,
+    /// Close the window once the project is saved (the close prompt's Save without a
+    /// project file yet).
+    close_after_save: bool,
+    /// The user chose to close without saving.
+    close_confirmed: bool,
     /// An autosave holding edits the opened work lacks.
     recovery: Option<PathBuf>,
     pub show_help: bool,
@@ -213,6 +220,8 @@ impl FrondApp {
             side_tab: SideTab::Segments,
             status: None,
             dialog: None,
+            close_after_save: false,
+            close_confirmed: false,
             recovery: None,
             show_help: false,
             show_frame_time: true,
@@ -415,7 +424,30 @@ impl FrondApp {
                 }
                 self.info(format!("saved {}", path.display()));
             }
-            Err(e) => self.fail(format!("could not save: {e}")),
+            Err(e) => {
+                self.close_after_save = false;
+                self.fail(format!("could not save: {e}"));
+            }
+        }
+    }
+
+    /// Whether closing now would lose edits (unsaved, and not yet confirmed by the user).
+    pub fn closing_loses_edits(&self) -> bool {
+        !self.close_confirmed && self.workspace.as_ref().is_some_and(|w| w.is_dirty())
+    }
+
+    /// Holds a close request while there are unsaved edits and asks what to do with them;
+    /// closes once a save asked for by that prompt has succeeded.
+    fn confirm_close(&mut self, ctx: &egui::Context) {
+        if self.close_after_save && !self.closing_loses_edits() && self.dialog.is_none() {
+            self.close_after_save = false;
+            self.close_confirmed = true;
+            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+            return;
+        }
+        if ctx.input(|i| i.viewport().close_requested()) && self.closing_loses_edits() {
+            ctx.send_viewport_cmd(egui::ViewportCommand::CancelClose);
+            self.dialog = Some(Dialog::ConfirmClose);
         }
     }
 
@@ -650,6 +682,7 @@ impl FrondApp {
     pub fn window_ui(&mut self, ui: &mut egui::Ui) {
         let started = Instant::now();
         let ctx = ui.ctx().clone();
+        self.confirm_close(&ctx);
         self.poll_job(&ctx);
         self.shortcuts(&ctx);
         self.autosave_tick();
@@ -1455,6 +1488,7 @@ impl FrondApp {
         let mut open = None;
         let mut save = None;
         let mut export = None;
+        let mut close = None;
         let modal = egui::Modal::new(egui::Id::unique("frond_dialog")).show(ctx, |ui| {
             ui.set_width(560.0);
             match &mut dialog {
@@ -1530,6 +1564,24 @@ impl FrondApp {
                         }
                     });
                 }
+                Dialog::ConfirmClose => {
+                    let name = self.workspace.as_ref().map_or_else(String::new, |w| w.name());
+                    ui.heading("Unsaved edits");
+                    ui.label(format!(
+                        "Save the edits to {name} before closing? Without saving they are lost."
+                    ));
+                    ui.horizontal(|ui| {
+                        if ui.button("Save").clicked() {
+                            close = Some(true);
+                        }
+                        if ui.button("Close without saving").clicked() {
+                            close = Some(false);
+                        }
+                        if ui.button("Cancel").clicked() {
+                            keep = false;
+                        }
+                    });
+                }
                 Dialog::Export { path } => {
                     ui.heading("Export");
                     ui.label("Writes plant.glb, plant.obj (+ materials and texture atlas), segmentation.ply and segments.json into the folder; leaves are fitted first if needed.");
@@ -1552,6 +1604,7 @@ impl FrondApp {
             self.open(path);
             keep = false;
         }
+        let saved = save.is_some();
         if let Some(path) = save {
             self.save_as(path);
             keep = false;
@@ -1559,6 +1612,26 @@ impl FrondApp {
         if let Some(folder) = export {
             self.export(folder);
             keep = false;
+        }
+        match close {
+            Some(true) => {
+                keep = false;
+                self.close_after_save = true;
+                self.save();
+            }
+            Some(false) => {
+                keep = false;
+                self.close_confirmed = true;
+                if let (Some(config), Some(workspace)) = (&self.config, &self.workspace) {
+                    let _ = std::fs::remove_file(config.autosave_path(&workspace.input));
+                }
+                ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+            }
+            None => {}
+        }
+        // A save-as dialog the close prompt opened and the user cancelled: stay open.
+        if !keep && !saved && matches!(dialog, Dialog::SaveAs { .. }) {
+            self.close_after_save = false;
         }
         if keep {
             self.dialog = Some(dialog);

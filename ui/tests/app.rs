@@ -604,6 +604,84 @@ fn saving_autosave_and_crash_recovery_keep_the_edits() {
     std::fs::remove_file(project_path).unwrap();
 }
 
+/// Asks the window to close (the title bar's close button).
+fn request_close(harness: &mut Harness<'static, FrondApp>) {
+    harness
+        .input_mut()
+        .viewports
+        .entry(egui::ViewportId::ROOT)
+        .or_default()
+        .events
+        .push(egui::ViewportEvent::Close);
+    harness.step();
+}
+
+/// Steps once more (a new modal is laid out invisibly in its first frame).
+fn show_prompt(harness: &mut Harness<'static, FrondApp>) {
+    harness.step();
+}
+
+/// The commands the last frame sent to the window.
+fn window_commands(harness: &Harness<'static, FrondApp>) -> Vec<egui::ViewportCommand> {
+    harness
+        .output()
+        .viewport_output
+        .get(&egui::ViewportId::ROOT)
+        .map_or_else(Vec::new, |v| v.commands.clone())
+}
+
+#[test]
+fn closing_with_unsaved_edits_asks_and_saves_or_discards() {
+    let config = tempfile::tempdir().unwrap();
+    let project_dir = tempfile::tempdir().unwrap();
+    let project_path = project_dir.path().join("closing.frond");
+    let mut harness = harness_with(dataset().to_path_buf(), config.path());
+    let leaves = leaves_in_view(session(&harness));
+
+    // Nothing unsaved: a close request goes through.
+    request_close(&mut harness);
+    assert!(!window_commands(&harness).contains(&egui::ViewportCommand::CancelClose));
+    assert!(harness.query_by_label("Close without saving").is_none());
+
+    // Saved once, then edited again: the close is held and the prompt's Save saves.
+    click(&mut harness, central_pixel(&leaves[0].1));
+    harness.state_mut().save_as(project_path.clone());
+    click(&mut harness, central_pixel(&leaves[1].1));
+    assert!(harness.state().closing_loses_edits());
+    request_close(&mut harness);
+    assert!(window_commands(&harness).contains(&egui::ViewportCommand::CancelClose));
+    show_prompt(&mut harness);
+    harness.get_by_label("Unsaved edits");
+    harness.get_by_label("Save").click();
+    harness.run_steps(2);
+    assert!(
+        window_commands(&harness).contains(&egui::ViewportCommand::Close),
+        "{:?}",
+        harness.state().status()
+    );
+    let project = Project::read(&project_path).unwrap();
+    assert_eq!((project.history.len(), project.position), (2, 2));
+
+    // Edited and autosaved, then closed without saving: the autosave goes too.
+    let mut harness = harness_with(project_path.clone(), config.path());
+    click(&mut harness, central_pixel(&leaves[2].1));
+    harness.state_mut().autosave_interval = Duration::ZERO;
+    harness.step();
+    let autosave = ConfigDir {
+        dir: config.path().to_path_buf(),
+    }
+    .autosave_path(&project_path);
+    assert!(autosave.is_file(), "no autosave at {}", autosave.display());
+    request_close(&mut harness);
+    assert!(window_commands(&harness).contains(&egui::ViewportCommand::CancelClose));
+    show_prompt(&mut harness);
+    harness.get_by_label("Close without saving").click();
+    harness.step();
+    assert!(window_commands(&harness).contains(&egui::ViewportCommand::Close));
+    assert!(!autosave.exists());
+    assert_eq!(Project::read(&project_path).unwrap().history.len(), 2);
+}
+
 #[test]
 fn fitting_runs_off_thread_can_be_cancelled_and_exports() {
     let config = tempfile::tempdir().unwrap();
