@@ -1404,6 +1404,25 @@ mod tests {
         mesh
     }
 
+    /// A square 0.4 wide at `x` on the plane z = 0, uploaded with `object_id`.
+    fn add_square(
+        renderer: &Renderer,
+        scene: &mut GpuScene,
+        texture: TextureHandle,
+        x: f32,
+        object_id: u32,
+    ) -> MeshHandle {
+        renderer
+            .add_mesh(
+                scene,
+                &square_at(Point3::new(x, 0.0, 0.0), 0.2),
+                texture,
+                object_id,
+                false,
+            )
+            .unwrap()
+    }
+
     fn camera(width: u32, height: u32) -> ViewCamera {
         ViewCamera {
             width,
@@ -1500,24 +1519,8 @@ mod tests {
     fn hidden_meshes_are_not_drawn_until_shown_again() {
         let mut renderer = renderer();
         let (mut scene, texture) = white_scene(&renderer);
-        let left = renderer
-            .add_mesh(
-                &mut scene,
-                &square_at(Point3::new(-0.3, 0.0, 0.0), 0.2),
-                texture,
-                3,
-                false,
-            )
-            .unwrap();
-        renderer
-            .add_mesh(
-                &mut scene,
-                &square_at(Point3::new(0.3, 0.0, 0.0), 0.2),
-                texture,
-                4,
-                false,
-            )
-            .unwrap();
+        let left = add_square(&renderer, &mut scene, texture, -0.3, 3);
+        add_square(&renderer, &mut scene, texture, 0.3, 4);
         let view = camera(160, 120);
         let ids = |renderer: &mut Renderer, scene: &GpuScene| {
             let out = renderer.render(scene, &view, &Lighting::default()).unwrap();
@@ -1537,15 +1540,7 @@ mod tests {
     fn replaced_geometry_is_drawn_with_the_same_id_and_texture() {
         let mut renderer = renderer();
         let (mut scene, texture) = white_scene(&renderer);
-        let mesh = renderer
-            .add_mesh(
-                &mut scene,
-                &square_at(Point3::new(-0.3, 0.0, 0.0), 0.2),
-                texture,
-                7,
-                false,
-            )
-            .unwrap();
+        let mesh = add_square(&renderer, &mut scene, texture, -0.3, 7);
         let view = camera(160, 120);
         // Mean column of the pixels showing id 7, and how many there are.
         let where_drawn = |renderer: &mut Renderer, scene: &GpuScene| {

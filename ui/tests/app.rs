@@ -364,6 +364,24 @@ fn branch_pixel(session: &Session, branch: u32, s: f64) -> [f64; 2] {
     project(session, 0, &branch.cylinder.skeleton.point_at_fraction(s))
 }
 
+/// Leaf at tip (T), then delete (D), each by a click at `pos` on the branch.
+fn tip_leaf_then_delete(harness: &mut Harness<'static, FrondApp>, branch: u32, pos: Pos2) {
+    key(harness, Key::T);
+    click_screen(harness, pos);
+    assert!(
+        session(harness).branches().get(branch).unwrap().leaf_at_tip,
+        "{:?}",
+        harness.state().status()
+    );
+    key(harness, Key::D);
+    click_screen(harness, pos);
+    assert!(
+        session(harness).branches().get(branch).is_none(),
+        "{:?}",
+        harness.state().status()
+    );
+}
+
 #[test]
 fn branch_tools_edit_the_branch_tree_with_undo() {
     let config = tempfile::tempdir().unwrap();
@@ -426,21 +444,8 @@ fn branch_tools_edit_the_branch_tree_with_undo() {
     assert!(widened.cylinder.radius_end > 0.0);
 
     // Leaf at tip, then delete, by clicking near the branch's outer part.
-    key(&mut harness, Key::T);
-    let on_branch = branch_pixel(session(&harness), drawn.id, 0.85);
-    click(&mut harness, on_branch);
-    assert!(
-        session(&harness)
-            .branches()
-            .get(drawn.id)
-            .unwrap()
-            .leaf_at_tip,
-        "{:?}",
-        harness.state().status()
-    );
-    key(&mut harness, Key::D);
-    click(&mut harness, on_branch);
-    assert!(session(&harness).branches().get(drawn.id).is_none());
+    let on_branch = screen(&harness, branch_pixel(session(&harness), drawn.id, 0.85));
+    tip_leaf_then_delete(&mut harness, drawn.id, on_branch);
     assert_eq!(session(&harness).branches().branches.len(), before);
     assert_eq!(history_len(&harness), (5, 5));
 
@@ -519,24 +524,7 @@ fn branches_are_drawn_and_moved_in_the_3d_view() {
 
     // Leaf at tip, then delete, by clicking the branch's outer part in the view.
     let on_branch = screen_of(&widened.cylinder.skeleton.point_at_fraction(0.8));
-    key(&mut harness, Key::T);
-    click_screen(&mut harness, on_branch);
-    assert!(
-        session(&harness)
-            .branches()
-            .get(drawn.id)
-            .unwrap()
-            .leaf_at_tip,
-        "{:?}",
-        harness.state().status()
-    );
-    key(&mut harness, Key::D);
-    click_screen(&mut harness, on_branch);
-    assert!(
-        session(&harness).branches().get(drawn.id).is_none(),
-        "{:?}",
-        harness.state().status()
-    );
+    tip_leaf_then_delete(&mut harness, drawn.id, on_branch);
     assert_eq!(history_len(&harness), (5, 5));
     // A click on nothing says so and changes nothing.
     click_screen(&mut harness, rect.left_top() + egui::vec2(3.0, 3.0));
