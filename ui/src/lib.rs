@@ -768,14 +768,14 @@ impl FrondApp {
 
     /// The last rebuilds after a change (edits, view, overlays), for the debug overlay.
     fn rebuild_text(&self) -> String {
-        let mut text = String::new();
+        let mut parts = Vec::new();
         if let Some(ms) = self.panel.last_compose_ms {
-            text += &format!(" · photo composed in {ms:.0} ms");
+            parts.push(format!("photo composed in {ms:.0} ms"));
         }
         if let Some(ms) = self.view3d.last_build_ms {
-            text += &format!(" · 3D built in {ms:.0} ms");
+            parts.push(format!("3D built in {ms:.0} ms"));
         }
-        text
+        parts.join(" · ")
     }
 
     fn benchmark_step(&mut self, ctx: &egui::Context, ui_ms: f32) {
@@ -1437,7 +1437,7 @@ impl FrondApp {
                 rect.right_top() + egui::vec2(-10.0, 28.0),
                 egui::Align2::RIGHT_TOP,
                 format!(
-                    "{} · {points} points{}",
+                    "{} · {points} points\n{}",
                     self.frame_time_text(),
                     self.rebuild_text()
                 ),
