@@ -34,6 +34,8 @@ pub enum RenderError {
     Size { width: u32, height: u32, limit: u32 },
     #[error("mesh for object {object_id}: {message}")]
     Mesh { object_id: u32, message: String },
+    #[error("no mesh with handle {0} in the scene")]
+    UnknownMesh(usize),
     #[error("reading the render back failed: {0}")]
     Readback(String),
 }
@@ -191,6 +193,8 @@ struct GpuMesh {
     /// Vertex and index buffers; `None` for an empty mesh.
     buffers: Option<(wgpu::Buffer, wgpu::Buffer)>,
     index_count: u32,
+    /// What the id pass writes for it.
+    object_id: u32,
     bind_group: wgpu::BindGroup,
     /// Drawn once, untransformed, by every render (else only through instance batches).
     is_static: bool,
@@ -278,9 +282,9 @@ pub struct Renderer {
 struct Targets {
     width: u32,
     height: u32,
-    /// Samples of the colour pass (1: it draws straight into `color_resolved`).
-    samples: u32,
-    color_msaa: wgpu::TextureView,
+    /// The multisampled colour target; `None` with one sample, when the colour pass draws
+    /// straight into `color_resolved`.
+    color_msaa: Option<wgpu::TextureView>,
     color_resolved: wgpu::Texture,
     color_resolved_view: wgpu::TextureView,
     /// The same texels seen as plain `Rgba8Unorm` (sRGB-encoded bytes, no decoding).
@@ -795,6 +799,7 @@ impl Renderer {
         scene.meshes.push(GpuMesh {
             buffers,
             index_count: (mesh.triangles.len() * 3) as u32,
+            object_id,
             bind_group,
             is_static,
             visible: true,
@@ -838,15 +843,13 @@ impl Renderer {
         handle: MeshHandle,
         mesh: &TriMesh,
     ) -> Result<(), RenderError> {
-        let object_id = u32::try_from(handle.0).unwrap_or(u32::MAX);
         let Some(old) = scene.meshes.get(handle.0) else {
-            return Err(RenderError::Mesh {
-                object_id,
-                message: format!("unknown mesh handle {}", handle.0),
-            });
+            return Err(RenderError::UnknownMesh(handle.0));
         };
-        mesh.validate()
-            .map_err(|message| RenderError::Mesh { object_id, message })?;
+        mesh.validate().map_err(|message| RenderError::Mesh {
+            object_id: old.object_id,
+            message,
+        })?;
         if old.is_static {
             scene.triangles = scene.triangles - old.index_count as usize / 3 + mesh.triangles.len();
         }
@@ -891,7 +894,8 @@ impl Renderer {
         let readable = attachment | wgpu::TextureUsages::COPY_SRC;
         let view = |t: &wgpu::Texture| t.create_view(&wgpu::TextureViewDescriptor::default());
         let samples = self.color_samples;
-        let color_msaa = texture("colour msaa", COLOR_FORMAT, samples, attachment);
+        let color_msaa =
+            (samples > 1).then(|| view(&texture("colour msaa", COLOR_FORMAT, samples, attachment)));
         let depth_msaa = texture("depth msaa", DEPTH_FORMAT, samples, attachment);
         let depth_single = texture("depth", DEPTH_FORMAT, 1, attachment);
         let color_resolved = texture(
@@ -903,8 +907,7 @@ impl Renderer {
         self.targets = Some(Targets {
             width,
             height,
-            samples,
-            color_msaa: view(&color_msaa),
+            color_msaa,
             color_resolved_view: view(&color_resolved),
             color_resolved_encoded_view: color_resolved.create_view(&wgpu::TextureViewDescriptor {
                 format: Some(wgpu::TextureFormat::Rgba8Unorm),
@@ -1277,16 +1280,20 @@ fn begin_color_pass<'a>(
     encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
         label: Some("colour"),
         color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-            view: if targets.samples > 1 {
-                &targets.color_msaa
-            } else {
-                &targets.color_resolved_view
-            },
+            view: targets
+                .color_msaa
+                .as_ref()
+                .unwrap_or(&targets.color_resolved_view),
             depth_slice: None,
-            resolve_target: (targets.samples > 1).then_some(&targets.color_resolved_view),
+            resolve_target: targets
+                .color_msaa
+                .as_ref()
+                .map(|_| &targets.color_resolved_view),
             ops: wgpu::Operations {
                 load: wgpu::LoadOp::Clear(clear),
-                store: if targets.samples > 1 {
+                // Multisampled samples are resolved and dropped; a single-sample target is
+                // the result.
+                store: if targets.color_msaa.is_some() {
                     wgpu::StoreOp::Discard
                 } else {
                     wgpu::StoreOp::Store
@@ -1571,16 +1578,14 @@ mod tests {
         // An empty mesh draws nothing; bad input is refused and changes nothing.
         let mut bad = moved.clone();
         bad.positions[0].x = f32::NAN;
-        assert!(
-            renderer
-                .replace_mesh_geometry(&mut scene, mesh, &bad)
-                .is_err()
-        );
-        assert!(
-            renderer
-                .replace_mesh_geometry(&mut scene, MeshHandle(9), &moved)
-                .is_err()
-        );
+        assert!(matches!(
+            renderer.replace_mesh_geometry(&mut scene, mesh, &bad),
+            Err(RenderError::Mesh { object_id: 7, .. })
+        ));
+        assert!(matches!(
+            renderer.replace_mesh_geometry(&mut scene, MeshHandle(9), &moved),
+            Err(RenderError::UnknownMesh(9))
+        ));
         assert_eq!(where_drawn(&mut renderer, &scene).1, count_after);
         renderer
             .replace_mesh_geometry(&mut scene, mesh, &TriMesh::default())

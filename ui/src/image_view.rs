@@ -801,7 +801,6 @@ impl ImagePanel {
         } else {
             None
         };
-        let handles = branch_handles(workspace, view);
         let pixels_per_point = ui.ctx().pixels_per_point();
         let key = CompositeKey {
             view,
@@ -822,10 +821,23 @@ impl ImagePanel {
             || overlays.points
             || (overlays.boundaries && segments.iter().any(Option::is_some))
             || (overlays.leaf_outlines && workspace.leaves.is_some())
-            || (overlays.branches && !handles.is_empty());
+            || (overlays.branches && !session.branches().branches.is_empty());
+        let recompose = composed && self.composite.as_ref().is_none_or(|(k, _)| *k != key);
+        // Branches projected into this view: for composing their curves, for the handles a
+        // branch tool shows and grabs, and for leaf-at-tip marks (not every frame otherwise).
+        let handles = if (overlays.branches
+            && (recompose
+                || tool.is_branch_tool()
+                || session.branches().branches.iter().any(|b| b.leaf_at_tip)))
+            || matches!(tool, Tool::MoveBranch | Tool::Radius)
+        {
+            branch_handles(workspace, view)
+        } else {
+            Vec::new()
+        };
         if !composed {
             self.composite = None;
-        } else if self.composite.as_ref().is_none_or(|(k, _)| *k != key) {
+        } else if recompose {
             let started = std::time::Instant::now();
             let mut canvas = match &photo {
                 Some(photo) => resample_photo(photo, size, &transform, key.size, pixels_per_point),
@@ -1257,10 +1269,7 @@ fn draw_branch_handles(
 ) {
     // Handles (radius circles, control points, ids) only while a branch tool is active: a
     // plant with a hundred branches is otherwise cluttered, and slow on a software rasteriser.
-    let show_handles = matches!(
-        tool,
-        Tool::MoveBranch | Tool::Radius | Tool::DrawBranch | Tool::LeafAtTip | Tool::DeleteBranch
-    );
+    let show_handles = tool.is_branch_tool();
     for handle in handles {
         for (uv, radius_px, _) in handle.ends.iter().flatten().filter(|_| show_handles) {
             let c = transform.screen_from_image(*uv);

@@ -80,6 +80,12 @@ impl Benchmark {
     }
 }
 
+/// Deletes the workspace's autosave (after a save, or when the user drops the edits); a
+/// missing file is fine.
+fn remove_autosave(config: &ConfigDir, workspace: &Workspace) {
+    let _ = std::fs::remove_file(config.autosave_path(&workspace.input));
+}
+
 /// Frames of the benchmark's editing phase (at most).
 const EDIT_BENCHMARK_FRAMES: usize = 20;
 
@@ -417,7 +423,7 @@ impl FrondApp {
         match workspace.save(&path) {
             Ok(()) => {
                 if let Some(config) = &self.config {
-                    let _ = std::fs::remove_file(config.autosave_path(&workspace.input));
+                    remove_autosave(config, workspace);
                     if let Ok(recent) = config.push_recent(&path) {
                         self.recent = recent;
                     }
@@ -894,10 +900,10 @@ impl FrondApp {
             "window": [ctx.content_rect().width(), ctx.content_rect().height()],
             "photo_compose_ms": self.panel.last_compose_ms,
             "build_3d_ms": self.view3d.last_build_ms,
-            "triangles_3d": self.view3d.triangle_counts().map(|[coarse, detail, branches, handles, leaves]| {
+            "triangles_3d": self.view3d.triangle_counts().map(|[moving, still, branches, handles, leaves]| {
                 serde_json::json!({
-                    "points_while_moving": coarse,
-                    "other_points": detail,
+                    "points_while_moving": moving,
+                    "points_when_still": still,
                     "branches": branches,
                     "handles_and_frusta": handles,
                     "leaves": leaves,
@@ -1623,7 +1629,7 @@ impl FrondApp {
                 keep = false;
                 self.close_confirmed = true;
                 if let (Some(config), Some(workspace)) = (&self.config, &self.workspace) {
-                    let _ = std::fs::remove_file(config.autosave_path(&workspace.input));
+                    remove_autosave(config, workspace);
                 }
                 ctx.send_viewport_cmd(egui::ViewportCommand::Close);
             }

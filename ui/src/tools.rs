@@ -158,6 +158,19 @@ impl Tool {
         }
     }
 
+    /// Whether the tool acts on branches (works in photos and the 3D view; branch handles
+    /// show while it is active).
+    pub fn is_branch_tool(self) -> bool {
+        matches!(
+            self,
+            Tool::DrawBranch
+                | Tool::MoveBranch
+                | Tool::Radius
+                | Tool::LeafAtTip
+                | Tool::DeleteBranch
+        )
+    }
+
     /// Whether the tool acts on segments (shown when the points overlay is on).
     pub fn is_segment_tool(self) -> bool {
         matches!(

@@ -897,14 +897,7 @@ impl View3d {
         let Some(orbit) = self.orbit else {
             return actions;
         };
-        if matches!(
-            tool,
-            Tool::DrawBranch
-                | Tool::MoveBranch
-                | Tool::Radius
-                | Tool::LeafAtTip
-                | Tool::DeleteBranch
-        ) {
+        if tool.is_branch_tool() {
             actions.extend(self.branch_tool(ui, &response, workspace, &orbit, tool));
         }
         if self.last_orbit != Some(orbit) {
