@@ -10,7 +10,10 @@
 //! branches), short spurs are pruned, and each branch gets a spline through its smoothed
 //! nodes and a linear radius fitted to the points' distances from its axis. Where many
 //! branches leave one crowded place (a rosette's crown), a side branch's wandering base is
-//! replaced by its own direction extended back to the parent's axis ([`reanchor_base`]).
+//! replaced by its own direction extended back to the parent's axis ([`reanchor_base`]); a
+//! branch that split off a neighbour it ran alongside is extended back to their common
+//! parent ([`sibling_of`]). Tubes the level sets merged into a neighbour all the way to their
+//! tips are found last, in the points no branch explains ([`recover_missed_tubes`]).
 
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap};
@@ -64,6 +67,8 @@ pub struct SkeletonStats {
     pub branches_pruned: usize,
     /// Side branches whose tangled base was replaced by a straight run to their parent.
     pub bases_reanchored: usize,
+    /// Branches found in points no other branch explains ([`recover_missed_tubes`]).
+    pub branches_recovered: usize,
 }
 
 /// Why no skeleton could be built.
@@ -431,8 +436,259 @@ pub fn automatic_skeleton(
             }
         }
     }
+    stats.branches_recovered = recover_missed_tubes(
+        &mut branches,
+        &TubeContext {
+            points,
+            edges: &edges,
+            distance: &distance,
+            tree: &tree,
+            level_width,
+            min_points: options.min_component_points,
+            min_length,
+        },
+    );
     stats.branches = branches.len();
     Ok((BranchTree { branches }, stats))
+}
+
+/// What [`recover_missed_tubes`] looks at.
+struct TubeContext<'a> {
+    points: &'a [Point3<f64>],
+    /// kNN edges within a level width.
+    edges: &'a [Vec<(usize, f64)>],
+    /// Geodesic distance from the root (infinite where not reached).
+    distance: &'a [f64],
+    tree: &'a ImmutableKdTree<f64, 3>,
+    level_width: f64,
+    min_points: usize,
+    min_length: f64,
+}
+
+/// Where two tubes run side by side to their tips (petioles leaving a crown together), the
+/// level sets hold both at once and the skeleton follows one, or runs between them. The points
+/// no branch explains (farther than its radius plus a level width from every axis: a level's
+/// centroid may sit up to about half a level off the axis, and the radius fit is rough) are
+/// grouped by the kNN graph. A group shaped like a piece of tube becomes a branch: as long
+/// as the shortest kept branch, its spread across its principal axis no more than the
+/// branches' median radius, and round rather than flat (the third principal spread at least
+/// 0.3 of the second: a half-visible ring gives about 0.44, a leaf fragment about 0.1). The
+/// branch is the group's centroids along that axis (one per level width), extended from the
+/// end nearer the root (in geodesic distance) straight back, at most twice the group's length,
+/// to an axis it meets within 3 of its radii, crossing it at 5° or more, the axis nearest the
+/// tree's root first; it is kept only where the points support the extension (as in
+/// [`reanchor_base`]). Returns how many branches were added.
+fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> usize {
+    const REACH_RADII: f64 = 3.0;
+    const ROUND: f64 = 0.3;
+    let crossing_sine = 5f64.to_radians().sin();
+    let TubeContext {
+        points,
+        edges,
+        distance,
+        tree,
+        level_width,
+        min_points,
+        min_length,
+    } = *context;
+    if branches.is_empty() {
+        return 0;
+    }
+    // Axis samples about every half level width, with their radii.
+    let mut samples: Vec<([f64; 3], f64)> = Vec::new();
+    for branch in branches.iter() {
+        let cylinder = &branch.cylinder;
+        let count =
+            ((cylinder.skeleton.length() / (0.5 * level_width)).ceil() as usize).clamp(2, 2000);
+        for (k, (p, _)) in cylinder
+            .skeleton
+            .sample_by_arc_length(count)
+            .iter()
+            .enumerate()
+        {
+            let fraction = k as f64 / (count - 1) as f64;
+            samples.push(([p.x, p.y, p.z], cylinder.radius_at(fraction)));
+        }
+    }
+    let coords: Vec<[f64; 3]> = samples.iter().map(|s| s.0).collect();
+    let Ok(axis_tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&coords) else {
+        return 0;
+    };
+    let unexplained: Vec<bool> = points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            if !distance[i].is_finite() {
+                return false;
+            }
+            let found = axis_tree
+                .query(&[p.x, p.y, p.z])
+                .nearest_n::<SquaredEuclidean<f64>>(NonZero::<usize>::MIN)
+                .execute();
+            found
+                .first()
+                .is_some_and(|f| f.distance.sqrt() > samples[f.item as usize].1 + level_width)
+        })
+        .collect();
+    let mut groups = UnionFind::new(points.len());
+    for (i, list) in edges.iter().enumerate() {
+        if unexplained[i] {
+            for &(j, _) in list {
+                if unexplained[j] {
+                    groups.union(i, j);
+                }
+            }
+        }
+    }
+    let mut members: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+    for i in (0..points.len()).filter(|&i| unexplained[i]) {
+        members.entry(groups.find(i)).or_default().push(i);
+    }
+    let mut radii: Vec<f64> = branches
+        .iter()
+        .map(|b| 0.5 * (b.cylinder.radius_start + b.cylinder.radius_end))
+        .collect();
+    radii.sort_by(f64::total_cmp);
+    let tube_spread = radii[radii.len() / 2];
+    let depth = |branches: &[Branch], mut id: u32| {
+        let mut depth = 0usize;
+        while let Some(parent) = branches[id as usize].parent {
+            depth += 1;
+            id = parent;
+            if depth > branches.len() {
+                break;
+            }
+        }
+        depth
+    };
+    let mut added = 0;
+    let mut groups: Vec<Vec<usize>> = members.into_values().collect();
+    groups.sort_by_key(|g| (std::cmp::Reverse(g.len()), g[0]));
+    for group in groups.into_iter().filter(|g| g.len() >= min_points) {
+        let count = group.len() as f64;
+        let centroid = group
+            .iter()
+            .fold(Vector3::zeros(), |a, &i| a + points[i].coords)
+            / count;
+        let mut covariance = nalgebra::Matrix3::zeros();
+        for &i in &group {
+            let d = points[i].coords - centroid;
+            covariance += d * d.transpose();
+        }
+        let eigen = nalgebra::SymmetricEigen::new(covariance / count);
+        let mut order = [0usize, 1, 2];
+        order.sort_by(|&a, &b| eigen.eigenvalues[b].total_cmp(&eigen.eigenvalues[a]));
+        let axis: Vector3<f64> = eigen.eigenvectors.column(order[0]).into_owned();
+        let across = eigen.eigenvalues[order[1]].max(0.0).sqrt();
+        let thickness = eigen.eigenvalues[order[2]].max(0.0).sqrt();
+        let along: Vec<f64> = group
+            .iter()
+            .map(|&i| (points[i].coords - centroid).dot(&axis))
+            .collect();
+        let (low, high) = along
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &a| {
+                (l.min(a), h.max(a))
+            });
+        let length = high - low;
+        if length < min_length || across > tube_spread || thickness < ROUND * across {
+            continue;
+        }
+        // Centroids per level width along the axis, from the end nearer the root.
+        let bins = ((length / level_width).ceil() as usize).max(1);
+        let mut sums = vec![(Vector3::zeros(), 0usize, 0.0f64); bins];
+        for (k, &i) in group.iter().enumerate() {
+            let bin = (((along[k] - low) / level_width) as usize).min(bins - 1);
+            sums[bin].0 += points[i].coords;
+            sums[bin].1 += 1;
+            sums[bin].2 += distance[i];
+        }
+        let mut polyline: Vec<Point3<f64>> = Vec::with_capacity(bins + 1);
+        let mut geodesic: Vec<f64> = Vec::with_capacity(bins);
+        for (sum, n, d) in &sums {
+            if *n > 0 {
+                polyline.push(Point3::from(sum / *n as f64));
+                geodesic.push(d / *n as f64);
+            }
+        }
+        if polyline.len() < 3 {
+            continue;
+        }
+        if geodesic[0] > geodesic[geodesic.len() - 1] {
+            polyline.reverse();
+        }
+        let polyline = smooth(&polyline);
+        let origin = polyline[0];
+        let reach = 2.0 * length;
+        let Some(backward) = (origin - polyline[polyline.len().min(4) - 1]).try_normalize(1e-12)
+        else {
+            continue;
+        };
+        // (depth, miss in radii, branch, fraction, point)
+        let mut best: Option<(usize, f64, u32, f64, Point3<f64>)> = None;
+        for branch in branches.iter() {
+            let samples = branch.cylinder.skeleton.sample_by_arc_length(128);
+            let last = (samples.len().max(2) - 1) as f64;
+            let branch_depth = depth(branches, branch.id);
+            for (k, (point, tangent)) in samples.iter().enumerate() {
+                let run = (point - origin).dot(&backward);
+                if run < 0.0 || run > reach || backward.cross(tangent).norm() < crossing_sine {
+                    continue;
+                }
+                let fraction = k as f64 / last;
+                let miss = (point - (origin + backward * run)).norm()
+                    / branch.cylinder.radius_at(fraction).max(1e-12);
+                if miss <= REACH_RADII
+                    && best
+                        .as_ref()
+                        .is_none_or(|b| (branch_depth, miss) < (b.0, b.1))
+                {
+                    best = Some((branch_depth, miss, branch.id, fraction, *point));
+                }
+            }
+        }
+        let Some((_, _, parent, fraction, anchor)) = best else {
+            continue;
+        };
+        let parent_radius = branches[parent as usize].cylinder.radius_at(fraction);
+        let extension = [anchor, origin];
+        let supported = support(
+            tree,
+            &extension,
+            1.5 * parent_radius,
+            0.5 * level_width,
+            across + 0.5 * level_width,
+        )
+        .unwrap_or(1.0);
+        if supported < 0.8 {
+            continue;
+        }
+        let mut control = vec![anchor];
+        control.extend(polyline.iter().copied());
+        let mut distances: Vec<f64> = group
+            .iter()
+            .map(|&i| {
+                control
+                    .windows(2)
+                    .map(|w| super::spline::point_segment_distance(&points[i], &w[0], &w[1]))
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .collect();
+        distances.sort_by(f64::total_cmp);
+        let radius = distances[distances.len() / 2].max(1e-6);
+        let Some(skeleton) = spline_through(&control) else {
+            continue;
+        };
+        branches.push(Branch {
+            id: branches.len() as u32,
+            parent: Some(parent),
+            parent_fraction: fraction,
+            cylinder: GeneralizedCylinder::new(skeleton, radius, radius),
+            leaf_at_tip: false,
+        });
+        added += 1;
+    }
+    added
 }
 
 /// Joins sibling pieces of a level that nearly touch (closest points less than a level width
@@ -801,20 +1057,7 @@ fn branch_from_chain(
     nodes: &[Node],
     points: &[Point3<f64>],
 ) -> Option<Branch> {
-    // Drop consecutive near-duplicates (a spline needs distinct consecutive points).
-    let mut control: Vec<Point3<f64>> = Vec::with_capacity(polyline.len());
-    for p in polyline {
-        if control
-            .last()
-            .is_none_or(|q: &Point3<f64>| (p - q).norm() > 1e-6)
-        {
-            control.push(*p);
-        }
-    }
-    if control.len() < 2 {
-        return None;
-    }
-    let skeleton = Spline::new(control).ok()?;
+    let skeleton = spline_through(polyline)?;
     // (arc fraction, radius) per chain node: median distance from the local axis.
     let offset = polyline.len() - chain.len();
     let mut arc = vec![0.0; polyline.len()];
@@ -854,6 +1097,24 @@ fn branch_from_chain(
         cylinder: GeneralizedCylinder::new(skeleton, radius_start, radius_end),
         leaf_at_tip: false,
     })
+}
+
+/// A spline through a polyline's points, consecutive near-duplicates dropped (a spline needs
+/// distinct consecutive points); `None` with fewer than two distinct points.
+fn spline_through(polyline: &[Point3<f64>]) -> Option<Spline> {
+    let mut control: Vec<Point3<f64>> = Vec::with_capacity(polyline.len());
+    for p in polyline {
+        if control
+            .last()
+            .is_none_or(|q: &Point3<f64>| (p - q).norm() > 1e-6)
+        {
+            control.push(*p);
+        }
+    }
+    if control.len() < 2 {
+        return None;
+    }
+    Spline::new(control).ok()
 }
 
 /// Least-squares line r(s) = a + b s through (s, r) samples, as (r(0), r(1)), kept positive;
@@ -924,6 +1185,17 @@ mod tests {
         points.extend(tube(&left, 0.004, 4_000.0, &mut rng));
         points.extend(tube(&right, 0.004, 4_000.0, &mut rng));
         let (tree, stats) = skeleton_z_up(&points);
+        for b in &tree.branches {
+            eprintln!(
+                "B{} par {:?} frac {} {:?} -> {:?} r {}",
+                b.id,
+                b.parent,
+                b.parent_fraction,
+                b.cylinder.skeleton.point_at_fraction(0.0),
+                b.cylinder.skeleton.point_at_fraction(1.0),
+                b.cylinder.radius_start
+            );
+        }
         assert_eq!(tree.branches.len(), 3, "{stats:?}");
         let main = &tree.branches[0];
         assert!(main.parent.is_none());
@@ -1063,6 +1335,100 @@ mod tests {
         // runs on into one petiole, so that one's partner stays its child.
         assert!(on_stem >= 6, "{on_stem} on the stem, {covered:?} {stats:?}");
         assert!(mean >= 0.78, "{covered:?} {stats:?}");
+    }
+
+    /// Runs [`recover_missed_tubes`] on `points` against `branches`, with brute-force edges
+    /// (within a level width of 4 mm) and the distance from the lowest point for geodesic.
+    fn recover(branches: &mut Vec<Branch>, points: &[Point3<f64>]) -> usize {
+        let level_width = 0.004;
+        let edges: Vec<Vec<(usize, f64)>> = points
+            .iter()
+            .map(|p| {
+                points
+                    .iter()
+                    .enumerate()
+                    .map(|(j, q)| (j, (p - q).norm()))
+                    .filter(|&(_, d)| d > 0.0 && d <= level_width)
+                    .collect()
+            })
+            .collect();
+        let root = points
+            .iter()
+            .min_by(|a, b| a.z.total_cmp(&b.z))
+            .copied()
+            .unwrap();
+        let distance: Vec<f64> = points.iter().map(|p| (p - root).norm()).collect();
+        let coords: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
+        let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&coords).unwrap();
+        recover_missed_tubes(
+            branches,
+            &TubeContext {
+                points,
+                edges: &edges,
+                distance: &distance,
+                tree: &tree,
+                level_width,
+                min_points: 12,
+                min_length: 3.0 * level_width,
+            },
+        )
+    }
+
+    #[test]
+    fn a_tube_no_branch_explains_becomes_a_branch_from_the_stem() {
+        let mut rng = Rng::seed_from(8);
+        let stem_axis = [Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, 0.12)];
+        let stem = Branch {
+            id: 0,
+            parent: None,
+            parent_fraction: 0.0,
+            cylinder: GeneralizedCylinder::new(
+                Spline::new(stem_axis.to_vec()).unwrap(),
+                0.005,
+                0.005,
+            ),
+            leaf_at_tip: false,
+        };
+        let mut points = tube(&stem_axis, 0.005, 6_000.0, &mut rng);
+        // A petiole from the stem at 60 mm, 40° from vertical; its first 25 mm hug the
+        // stem's own points, the rest is unexplained.
+        let direction = Vector3::new(40f64.to_radians().sin(), 0.0, 40f64.to_radians().cos());
+        let base = Point3::new(0.0, 0.0, 0.06);
+        let petiole = [base, base + direction * 0.1];
+        points.extend(tube(&petiole, 0.0025, 3_000.0, &mut rng));
+        // A flat strip (a leaf fragment) and a tube floating away from every axis: neither
+        // is a branch.
+        for _ in 0..600 {
+            let (u, v) = (rng.uniform(), rng.uniform());
+            points.push(Point3::new(
+                -0.02 - 0.06 * u,
+                0.01 * v,
+                0.05 + 0.001 * rng.uniform(),
+            ));
+        }
+        let floating = [Point3::new(0.0, 0.06, 0.05), Point3::new(0.0, 0.12, 0.05)];
+        points.extend(tube(&floating, 0.0025, 3_000.0, &mut rng));
+
+        let mut branches = vec![stem];
+        assert_eq!(recover(&mut branches, &points), 1);
+        let found = &branches[1];
+        assert_eq!(found.parent, Some(0));
+        let height = 0.12 * found.parent_fraction;
+        assert!((height - 0.06).abs() < 0.01, "attached at {height}");
+        // Outside the stem, it follows the petiole.
+        for s in 0..=10 {
+            let p = found.cylinder.skeleton.point_at_fraction(s as f64 / 10.0);
+            if p.x.hypot(p.y) < 0.005 {
+                continue;
+            }
+            let miss = crate::branch::spline::point_segment_distance(&p, &petiole[0], &petiole[1]);
+            assert!(miss < 0.004, "{p} is {miss} from the petiole's axis");
+        }
+        let tip = found.cylinder.skeleton.point_at_fraction(1.0);
+        assert!((tip - petiole[1]).norm() < 0.01, "tip {tip}");
+        assert!((found.cylinder.radius_at(0.5) - 0.0025).abs() < 0.0015);
+        // Once it is found, nothing is left to recover.
+        assert_eq!(recover(&mut branches, &points), 0);
     }
 
     #[test]
