@@ -1185,17 +1185,6 @@ mod tests {
         points.extend(tube(&left, 0.004, 4_000.0, &mut rng));
         points.extend(tube(&right, 0.004, 4_000.0, &mut rng));
         let (tree, stats) = skeleton_z_up(&points);
-        for b in &tree.branches {
-            eprintln!(
-                "B{} par {:?} frac {} {:?} -> {:?} r {}",
-                b.id,
-                b.parent,
-                b.parent_fraction,
-                b.cylinder.skeleton.point_at_fraction(0.0),
-                b.cylinder.skeleton.point_at_fraction(1.0),
-                b.cylinder.radius_start
-            );
-        }
         assert_eq!(tree.branches.len(), 3, "{stats:?}");
         let main = &tree.branches[0];
         assert!(main.parent.is_none());
