@@ -831,9 +831,9 @@ fn spread(node: &Node, points: &[Point3<f64>]) -> f64 {
 /// radii: the parent's or an ancestor's, within 3 radii, at most the branch's kept length
 /// away and crossing it at 5° or more (AdTree-like straight connection). A branch that left
 /// its parent as a sibling ([`sibling_of`]) is extended past the parent, as far as needed,
-/// to the grandparent or above, even with a clean base. The straight base is kept only where
-/// the points support it (see the end of the function). `None` when the base is clean and
-/// not a sibling's, or no axis qualifies.
+/// to the grandparent or above, even with a clean base or none near the parent. The
+/// straight base is kept only where the points support it (see the end of the function).
+/// `None` when the base is clean and not a sibling's, or no axis qualifies.
 fn reanchor_base(
     chain: &[usize],
     attachment: Option<Point3<f64>>,
@@ -864,9 +864,6 @@ fn reanchor_base(
     let inner = (0..chain.len() / 2)
         .take_while(|&k| parent_axis.skeleton.distance_to(&nodes[chain[k]].centroid) <= crowd)
         .count();
-    if inner == 0 {
-        return None;
-    }
     let spreads: Vec<f64> = chain.iter().map(|&v| spread(&nodes[v], points)).collect();
     let mut outer = spreads[chain.len() / 2..].to_vec();
     outer.sort_by(f64::total_cmp);
