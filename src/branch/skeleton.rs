@@ -1236,6 +1236,24 @@ mod tests {
             .fold(0.0, f64::max)
     }
 
+    /// [`best_coverage`] of each axis from `skip` past its start (outside the stem) on.
+    fn coverage_outside(
+        tree: &BranchTree,
+        axes: &[Vec<Point3<f64>>],
+        skip: f64,
+        tolerance: f64,
+    ) -> Vec<f64> {
+        axes.iter()
+            .map(|axis| {
+                let start = axis[0] + (axis[1] - axis[0]).normalize() * skip;
+                let outside: Vec<Point3<f64>> = std::iter::once(start)
+                    .chain(axis[1..].iter().copied())
+                    .collect();
+                best_coverage(tree, &outside, tolerance)
+            })
+            .collect()
+    }
+
     #[test]
     fn petioles_leaving_a_crowded_crown_start_on_the_stem() {
         const PETIOLES: usize = 10;
@@ -1262,16 +1280,7 @@ mod tests {
         let (tree, stats) = skeleton_z_up(&points);
         // Outside the stem (radius 12 mm), how much of each petiole one branch follows to
         // within 2 of its radii (the eval's tolerance for such a branch).
-        let covered: Vec<f64> = petioles
-            .iter()
-            .map(|axis| {
-                let start = axis[0] + (axis[1] - axis[0]).normalize() * 0.015;
-                let outside: Vec<Point3<f64>> = std::iter::once(start)
-                    .chain(axis[1..].iter().copied())
-                    .collect();
-                best_coverage(&tree, &outside, 0.007)
-            })
-            .collect();
+        let covered = coverage_outside(&tree, &petioles, 0.015, 0.007);
         let mean = covered.iter().sum::<f64>() / covered.len() as f64;
         // Measured: mean 0.92 with re-anchored bases, 0.87 when the chains' wandering bases
         // are kept (each petiole's base then follows a neighbour's through the crown).
@@ -1307,13 +1316,7 @@ mod tests {
         let (tree, stats) = skeleton_z_up(&points);
         // Outside the stem, how much of each petiole one branch follows to within 2 of its
         // radii (the eval's tolerance).
-        let covered: Vec<f64> = petioles
-            .iter()
-            .map(|axis| {
-                let start = axis[0] + (axis[1] - axis[0]).normalize() * 0.01;
-                best_coverage(&tree, &[start, axis[1]], 0.006)
-            })
-            .collect();
+        let covered = coverage_outside(&tree, &petioles, 0.01, 0.006);
         let on_stem = tree.branches.iter().filter(|b| b.parent == Some(0)).count();
         let mean = covered.iter().sum::<f64>() / covered.len() as f64;
         // Measured: 7 side branches start on the stem (one of them recovered from unexplained
