@@ -24,6 +24,7 @@ use nalgebra::{Point3, Vector3};
 use serde::Serialize;
 
 use super::{Branch, BranchTree, GeneralizedCylinder, Spline};
+use crate::graph::shape::Shape;
 use crate::util::union_find::UnionFind;
 
 /// Settings of the automatic skeleton.
@@ -479,9 +480,7 @@ struct TubeContext<'a> {
 /// tree's root first; it is kept only where the points support the extension (as in
 /// [`reanchor_base`]). Returns how many branches were added.
 fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> usize {
-    const REACH_RADII: f64 = 3.0;
     const ROUND: f64 = 0.3;
-    let crossing_sine = 5f64.to_radians().sin();
     let TubeContext {
         points,
         edges,
@@ -565,25 +564,11 @@ fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> us
     let mut groups: Vec<Vec<usize>> = members.into_values().collect();
     groups.sort_by_key(|g| (std::cmp::Reverse(g.len()), g[0]));
     for group in groups.into_iter().filter(|g| g.len() >= min_points) {
-        let count = group.len() as f64;
-        let centroid = group
-            .iter()
-            .fold(Vector3::zeros(), |a, &i| a + points[i].coords)
-            / count;
-        let mut covariance = nalgebra::Matrix3::zeros();
-        for &i in &group {
-            let d = points[i].coords - centroid;
-            covariance += d * d.transpose();
-        }
-        let eigen = nalgebra::SymmetricEigen::new(covariance / count);
-        let mut order = [0usize, 1, 2];
-        order.sort_by(|&a, &b| eigen.eigenvalues[b].total_cmp(&eigen.eigenvalues[a]));
-        let axis: Vector3<f64> = eigen.eigenvectors.column(order[0]).into_owned();
-        let across = eigen.eigenvalues[order[1]].max(0.0).sqrt();
-        let thickness = eigen.eigenvalues[order[2]].max(0.0).sqrt();
+        let shape = Shape::of(group.iter().map(|&i| points[i]));
+        let across = shape.eigenvalues[1].sqrt();
         let along: Vec<f64> = group
             .iter()
-            .map(|&i| (points[i].coords - centroid).dot(&axis))
+            .map(|&i| (points[i] - shape.centroid).dot(&shape.axes[0]))
             .collect();
         let (low, high) = along
             .iter()
@@ -591,7 +576,7 @@ fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> us
                 (l.min(a), h.max(a))
             });
         let length = high - low;
-        if length < min_length || across > tube_spread || thickness < ROUND * across {
+        if length < min_length || across > tube_spread || shape.flatness() < ROUND {
             continue;
         }
         // Centroids per level width along the axis, from the end nearer the root.
@@ -619,37 +604,22 @@ fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> us
         }
         let polyline = smooth(&polyline);
         let origin = polyline[0];
-        let reach = 2.0 * length;
         let Some(backward) = (origin - polyline[polyline.len().min(4) - 1]).try_normalize(1e-12)
         else {
             continue;
         };
-        // (depth, miss in radii, branch, fraction, point)
-        let mut best: Option<(usize, f64, u32, f64, Point3<f64>)> = None;
-        for branch in branches.iter() {
-            let samples = branch.cylinder.skeleton.sample_by_arc_length(128);
-            let last = (samples.len().max(2) - 1) as f64;
-            let branch_depth = depth(branches, branch.id);
-            for (k, (point, tangent)) in samples.iter().enumerate() {
-                let run = (point - origin).dot(&backward);
-                if run < 0.0 || run > reach || backward.cross(tangent).norm() < crossing_sine {
-                    continue;
-                }
-                let fraction = k as f64 / last;
-                let miss = (point - (origin + backward * run)).norm()
-                    / branch.cylinder.radius_at(fraction).max(1e-12);
-                if miss <= REACH_RADII
-                    && best
-                        .as_ref()
-                        .is_none_or(|b| (branch_depth, miss) < (b.0, b.1))
-                {
-                    best = Some((branch_depth, miss, branch.id, fraction, *point));
-                }
-            }
-        }
-        let Some((_, _, parent, fraction, anchor)) = best else {
+        // The axis nearest the tree's root first, then the closest crossing.
+        let Some((_, parent, crossing)) = branches
+            .iter()
+            .filter_map(|branch| {
+                let crossing = closest_crossing(branch, &origin, &backward, 2.0 * length)?;
+                Some((depth(branches, branch.id), branch.id, crossing))
+            })
+            .min_by(|a, b| a.0.cmp(&b.0).then(a.2.miss.total_cmp(&b.2.miss)))
+        else {
             continue;
         };
+        let (fraction, anchor) = (crossing.fraction, crossing.point);
         let parent_radius = branches[parent as usize].cylinder.radius_at(fraction);
         let extension = [anchor, origin];
         let supported = support(
@@ -665,20 +635,15 @@ fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> us
         }
         let mut control = vec![anchor];
         control.extend(polyline.iter().copied());
-        let mut distances: Vec<f64> = group
-            .iter()
-            .map(|&i| {
-                control
-                    .windows(2)
-                    .map(|w| super::spline::point_segment_distance(&points[i], &w[0], &w[1]))
-                    .fold(f64::INFINITY, f64::min)
-            })
-            .collect();
-        distances.sort_by(f64::total_cmp);
-        let radius = distances[distances.len() / 2].max(1e-6);
         let Some(skeleton) = spline_through(&control) else {
             continue;
         };
+        let mut distances: Vec<f64> = group
+            .iter()
+            .map(|&i| skeleton.closest_fraction(&points[i]).1)
+            .collect();
+        distances.sort_by(f64::total_cmp);
+        let radius = distances[distances.len() / 2].max(1e-6);
         branches.push(Branch {
             id: branches.len() as u32,
             parent: Some(parent),
@@ -849,11 +814,8 @@ fn reanchor_base(
     } = *context;
     const WIDE: f64 = 1.5;
     const DIRECTION_NODES: usize = 4;
-    const REACH_RADII: f64 = 3.0;
     const CROWD_RADII: f64 = 5.0;
-    const CROSSING_DEG: f64 = 5.0;
     let kink_cosine = 45f64.to_radians().cos();
-    let crossing_sine = CROSSING_DEG.to_radians().sin();
     if chain.len() <= DIRECTION_NODES {
         return None;
     }
@@ -919,28 +881,18 @@ fn reanchor_base(
     let mut best: Option<(f64, Anchor)> = None;
     while let Some(id) = candidate {
         let branch = &branches[id as usize];
-        let samples = branch.cylinder.skeleton.sample_by_arc_length(128);
-        let last = (samples.len().max(2) - 1) as f64;
-        for (i, (point, tangent)) in samples.iter().enumerate() {
-            let along = (point - origin).dot(&direction);
-            if along < 0.0 || along > kept_length || direction.cross(tangent).norm() < crossing_sine
-            {
-                continue;
-            }
-            let fraction = i as f64 / last;
-            let miss = (point - (origin + direction * along)).norm()
-                / branch.cylinder.radius_at(fraction).max(1e-12);
-            if miss <= REACH_RADII && best.as_ref().is_none_or(|b| miss < b.0) {
-                best = Some((
-                    miss,
-                    Anchor {
-                        first_clean,
-                        parent: id,
-                        fraction,
-                        point: *point,
-                    },
-                ));
-            }
+        if let Some(crossing) = closest_crossing(branch, &origin, &direction, kept_length)
+            && best.as_ref().is_none_or(|b| crossing.miss < b.0)
+        {
+            best = Some((
+                crossing.miss,
+                Anchor {
+                    first_clean,
+                    parent: id,
+                    fraction: crossing.fraction,
+                    point: crossing.point,
+                },
+            ));
         }
         candidate = branch.parent;
     }
@@ -958,6 +910,48 @@ fn reanchor_base(
     let old_base = &path[..=first_clean + offset];
     let old_support = support(tree, old_base, 1.5 * parent_radius, step, tolerance).unwrap_or(0.0);
     (new_support >= 0.8 && new_support + 0.05 >= old_support).then_some(anchor)
+}
+
+/// Where a line from `origin` running `direction` passes an axis (see [`closest_crossing`]).
+struct Crossing {
+    /// Distance between the line and the axis sample, in the axis's radii.
+    miss: f64,
+    /// Arc fraction and point on the axis.
+    fraction: f64,
+    point: Point3<f64>,
+}
+
+/// The sample of a branch's axis (128 by arc length) that the line from `origin` along
+/// `direction` passes closest, in the axis's radii: among samples at most `reach` along the
+/// line and crossing it at 5° or more, within 3 radii; `None` when no sample qualifies.
+fn closest_crossing(
+    branch: &Branch,
+    origin: &Point3<f64>,
+    direction: &Vector3<f64>,
+    reach: f64,
+) -> Option<Crossing> {
+    const REACH_RADII: f64 = 3.0;
+    let crossing_sine = 5f64.to_radians().sin();
+    let samples = branch.cylinder.skeleton.sample_by_arc_length(128);
+    let last = (samples.len().max(2) - 1) as f64;
+    let mut best: Option<Crossing> = None;
+    for (i, (point, tangent)) in samples.iter().enumerate() {
+        let along = (point - origin).dot(direction);
+        if along < 0.0 || along > reach || direction.cross(tangent).norm() < crossing_sine {
+            continue;
+        }
+        let fraction = i as f64 / last;
+        let miss = (point - (origin + direction * along)).norm()
+            / branch.cylinder.radius_at(fraction).max(1e-12);
+        if miss <= REACH_RADII && best.as_ref().is_none_or(|b| miss < b.miss) {
+            best = Some(Crossing {
+                miss,
+                fraction,
+                point: *point,
+            });
+        }
+    }
+    best
 }
 
 /// Branches leaving a common parent together (petioles from a crown, twigs from a whorl)
