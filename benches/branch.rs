@@ -11,9 +11,9 @@ use frond::branch::skeleton::{SkeletonOptions, automatic_skeleton};
 use frond::branch::{CylinderMeshing, GeneralizedCylinder, Spline};
 use frond::edit::Session;
 use frond::graph::knn_pairs;
-use frond::graph::pipeline::{SegmentOptions, segment_scene};
 use frond::graph::points::PointSet;
 use frond::scene::Scene;
+use frond::segment::{SegmentOptions, segment_scene};
 use frond::synth::{Preset, SynthOptions, write_dataset};
 use frond::util::progress::NoProgress;
 use nalgebra::Point3;
@@ -57,7 +57,7 @@ fn branches(c: &mut Criterion) {
     let segmentation =
         segment_scene(&scene, &SegmentOptions::default(), &NoProgress).expect("segmentation");
     let session = Session::new(scene, segmentation);
-    let points = skeleton_points(&session);
+    let points = skeleton_points(session.segmentation(), session.labels());
     let foreground = &session.segmentation().foreground;
     let (up, centre) = (foreground.up, foreground.plant_center);
     let (tree, stats) =

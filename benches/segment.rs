@@ -5,12 +5,12 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use frond::graph::foreground::{ForegroundOptions, PointClass, separate_foreground};
 use frond::graph::gradient::GradientImage;
-use frond::graph::pipeline::{SegmentOptions, segment_scene};
 use frond::graph::points::PointSet;
 use frond::graph::{GraphOptions, PointGraph, ViewData, knn_pairs};
 use frond::scene::Scene;
+use frond::segment::foreground::{ForegroundOptions, PointClass, separate_foreground};
+use frond::segment::{SegmentOptions, segment_scene};
 use frond::synth::{Preset, SynthOptions, write_dataset};
 use frond::util::progress::NoProgress;
 

@@ -8,9 +8,9 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use frond::eval::{EvalOptions, GroundTruth, MatchingOptions, score_leaves};
-use frond::graph::foreground::PointClass;
-use frond::graph::pipeline::{SegmentOptions, segment_scene};
 use frond::scene::Scene;
+use frond::segment::foreground::PointClass;
+use frond::segment::{SegmentOptions, segment_scene};
 use frond::util::progress::NoProgress;
 
 fn main() -> Result<()> {

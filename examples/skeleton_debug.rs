@@ -3,8 +3,8 @@
 use frond::branch::plant::skeleton_points;
 use frond::branch::skeleton::{SkeletonOptions, automatic_skeleton};
 use frond::edit::Session;
-use frond::graph::pipeline::{SegmentOptions, segment_scene};
 use frond::scene::Scene;
+use frond::segment::{SegmentOptions, segment_scene};
 use frond::util::progress::NoProgress;
 
 fn main() -> anyhow::Result<()> {
@@ -14,7 +14,7 @@ fn main() -> anyhow::Result<()> {
     let scene = Scene::open(std::path::Path::new(&path))?;
     let segmentation = segment_scene(&scene, &SegmentOptions::default(), &NoProgress)?;
     let session = Session::new(scene, segmentation);
-    let points = skeleton_points(&session);
+    let points = skeleton_points(session.segmentation(), session.labels());
     let foreground = &session.segmentation().foreground;
     let (tree, stats) = automatic_skeleton(
         &points,

@@ -10,7 +10,6 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use frond::eval::GroundTruth;
 use frond::graph::components::Adjacency;
-use frond::graph::foreground::{ForegroundOptions, PointClass, separate_foreground};
 use frond::graph::gradient::GradientImage;
 use frond::graph::lanczos::{LanczosOptions, fiedler_vector};
 use frond::graph::ncut::best_sweep_split;
@@ -18,6 +17,7 @@ use frond::graph::points::PointSet;
 use frond::graph::shape::Shape;
 use frond::graph::{GraphOptions, PointGraph, ViewData};
 use frond::scene::Scene;
+use frond::segment::foreground::{ForegroundOptions, PointClass, separate_foreground};
 
 fn majority(labels: &[i64]) -> (i64, f64) {
     let mut counts: HashMap<i64, usize> = HashMap::new();

@@ -56,6 +56,8 @@ def main():
     scale = path_radius_mm / radius
     print(f"{len(centres)} cameras on a circle of {radius:.4f} model units: {scale:.1f} mm per unit")
     skeleton = json.load(open(skeleton_path))
+    if isinstance(skeleton, dict):  # versioned file: {"format", "version", "branches"}
+        skeleton = skeleton["branches"]
     measures = json.load(open(measures_path))
     roots = [b for b in skeleton if b["parent"] is None]
     if not roots:

@@ -27,6 +27,7 @@ pub mod lod;
 pub mod mesh;
 pub mod model;
 pub mod mvs;
+pub mod pipeline;
 pub mod render;
 pub mod scene;
 pub mod segment;

@@ -10,8 +10,8 @@ use std::sync::OnceLock;
 use frond::edit::project::{PROJECT_FORMAT, PROJECT_VERSION, Project, ProjectInput};
 use frond::edit::{Command, EditError, PixelRef, Session, open_project, save_session};
 use frond::eval::{GroundTruth, LeafScores, MatchingOptions, score_leaves};
-use frond::graph::pipeline::{SegmentLabel, SegmentOptions, segment_scene};
 use frond::scene::Scene;
+use frond::segment::{SegmentLabel, SegmentOptions, segment_scene};
 use frond::synth::{Preset, SynthOptions};
 use frond::util::progress::NoProgress;
 use nalgebra::Point2;
@@ -551,11 +551,11 @@ fn killed_save_leaves_the_previous_project_intact() {
 
 use frond::branch::BranchTree;
 use frond::edit::{BranchEnd, BranchStroke, BranchTarget, ViewCamera};
-use frond::eval::SkeletonBranch;
+use frond::eval::SkeletonRecord;
 use nalgebra::Point3;
 
 /// Mean distance from points along a branch's skeleton to a GT centreline.
-fn mean_distance_to(tree: &BranchTree, id: u32, truth: &SkeletonBranch) -> f64 {
+fn mean_distance_to(tree: &BranchTree, id: u32, truth: &SkeletonRecord) -> f64 {
     let polyline: Vec<Point3<f64>> = truth.centerline.iter().map(|p| Point3::from(*p)).collect();
     let samples = tree
         .get(id)
@@ -576,7 +576,7 @@ fn mean_distance_to(tree: &BranchTree, id: u32, truth: &SkeletonBranch) -> f64 {
 }
 
 /// The GT centreline projected into a view, and its length there in pixels.
-fn projected_centerline(session: &Session, view: usize, truth: &SkeletonBranch) -> Vec<[f64; 2]> {
+fn projected_centerline(session: &Session, view: usize, truth: &SkeletonRecord) -> Vec<[f64; 2]> {
     let model = &session.scene().reconstruction;
     let image = &model.images()[view];
     truth
@@ -597,7 +597,7 @@ fn stroke_length(stroke: &[[f64; 2]]) -> f64 {
 /// The view a user would draw a GT branch in: not foreshortened, and where most of its
 /// surface is seen (GT stem points observed in the view projecting within 4 px of its
 /// centreline).
-fn best_view_for(session: &Session, truth_branch: &SkeletonBranch) -> usize {
+fn best_view_for(session: &Session, truth_branch: &SkeletonRecord) -> usize {
     let model = &session.scene().reconstruction;
     let points = &session.segmentation().points;
     let parts = truth().points.parts.as_ref().unwrap();
@@ -644,13 +644,13 @@ fn session_without_branches() -> Session {
 }
 
 /// The GT stem and its longest petiole.
-fn stem_and_petiole() -> (&'static SkeletonBranch, &'static SkeletonBranch) {
+fn stem_and_petiole() -> (&'static SkeletonRecord, &'static SkeletonRecord) {
     let branches = &truth().branches;
     let stem = branches.iter().find(|b| b.parent.is_none()).unwrap();
     let petiole = branches
         .iter()
         .filter(|b| b.parent == Some(stem.id))
-        .max_by(|a, b| a.length().total_cmp(&b.length()))
+        .max_by(|a, b| a.centerline_length().total_cmp(&b.centerline_length()))
         .unwrap();
     (stem, petiole)
 }
@@ -711,10 +711,10 @@ fn a_petiole_drawn_in_a_photo_or_the_3d_view_follows_the_true_one() {
     let error = mean_distance_to(&tree, drawn.id, petiole);
     eprintln!(
         "petiole ({:.3} m) drawn in photo {view}: mean distance {error:.5} m ({:.1} % of its length)",
-        petiole.length(),
-        100.0 * error / petiole.length()
+        petiole.centerline_length(),
+        100.0 * error / petiole.centerline_length()
     );
-    assert!(error < 0.05 * petiole.length(), "{error}");
+    assert!(error < 0.05 * petiole.centerline_length(), "{error}");
 
     // The same stroke in the 3D panel's camera placed at that photo (its snap points are not
     // limited to those the photo sees).
@@ -731,7 +731,10 @@ fn a_petiole_drawn_in_a_photo_or_the_3d_view_follows_the_true_one() {
     let from_view = session.branches().clone();
     let view_error = mean_distance_to(&from_view, from_view.branches.last().unwrap().id, petiole);
     eprintln!("petiole drawn in the 3D view: mean distance {view_error:.5} m");
-    assert!(view_error < 0.05 * petiole.length(), "{view_error}");
+    assert!(
+        view_error < 0.05 * petiole.centerline_length(),
+        "{view_error}"
+    );
 }
 
 #[test]
@@ -794,7 +797,7 @@ fn a_main_stem_drawn_on_an_empty_tree_is_the_root() {
     let radius = 0.5 * (stem.radius_start + stem.radius_end);
     eprintln!(
         "stem ({:.3} m long, radius {radius:.4}) drawn in photo {view}: mean distance {error:.4} m = {:.2} radii",
-        stem.length(),
+        stem.centerline_length(),
         error / radius
     );
     assert!(
@@ -809,7 +812,7 @@ fn branches_drawn_in_3d_snap_to_the_points() {
     let (stem, petiole) = stem_and_petiole();
     // The GT centrelines with 3 mm of noise, as a hand in a 3D view would draw them.
     let mut rng = frond::util::rng::Rng::seed_from(7);
-    let mut noisy = |b: &SkeletonBranch| -> Vec<[f64; 3]> {
+    let mut noisy = |b: &SkeletonRecord| -> Vec<[f64; 3]> {
         b.centerline
             .iter()
             .map(|p| {

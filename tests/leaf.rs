@@ -70,7 +70,27 @@ fn reconstruct_writes_every_output_and_a_report() {
     let counts = &report["counts"];
     let fitted = counts["leaves_fitted"].as_u64().unwrap();
     assert!(fitted >= 8, "{counts}");
-    assert_eq!(report["leaves"].as_array().unwrap().len() as u64, fitted);
+    // The glb read back (by the gltf crate) holds a leaf node with a mesh for every fitted
+    // leaf the report lists, and one per posed leaf besides.
+    let glb = std::fs::read(out.join("plant.glb")).unwrap();
+    let nodes = frond::model::gltf::read_glb_meshes(&glb, &out.join("plant.glb")).unwrap();
+    let leaf_nodes: std::collections::BTreeMap<String, usize> = nodes
+        .iter()
+        .filter(|n| n.name.starts_with("leaf_"))
+        .map(|n| (n.name.clone(), n.mesh.triangles.len()))
+        .collect();
+    for leaf in report["leaves"].as_array().unwrap() {
+        let name = format!("leaf_{:03}", leaf["segment"].as_u64().unwrap());
+        assert!(
+            leaf_nodes.get(&name).is_some_and(|&t| t > 0),
+            "{name} not in the glb"
+        );
+    }
+    assert_eq!(
+        leaf_nodes.len() as u64,
+        fitted + counts["leaves_posed"].as_u64().unwrap(),
+        "{counts}"
+    );
     assert!(report["timings"]["total"].as_f64().unwrap() > 0.0);
     assert!(report["timings"]["leaves"]["fitting"].as_f64().unwrap() > 0.0);
     assert!(report["segmentation"]["timings"]["total"].as_f64().unwrap() > 0.0);

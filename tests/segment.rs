@@ -6,8 +6,9 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use frond::eval::{EvalOptions, GroundTruth, Prediction, evaluate};
-use frond::graph::pipeline::{SegmentError, SegmentOptions, segment_scene, write_segmentation};
+use frond::pipeline::write_automatic_segmentation;
 use frond::scene::{ModelFormat, Scene, SceneSource, read_model, write_model};
+use frond::segment::{SegmentError, SegmentOptions, segment_scene};
 use frond::synth::{Preset, SynthOptions};
 use frond::util::progress::NoProgress;
 use tempfile::TempDir;
@@ -34,7 +35,7 @@ fn broadleaf_leaves_are_recovered() {
     let scene = Scene::open(dataset()).unwrap();
     let segmentation = segment_scene(&scene, &SegmentOptions::default(), &NoProgress).unwrap();
     let out = tempfile::tempdir().unwrap();
-    write_segmentation(out.path(), &segmentation).unwrap();
+    write_automatic_segmentation(&scene, &segmentation, out.path()).unwrap();
     let truth = GroundTruth::load(dataset()).unwrap();
     let prediction = Prediction::load(out.path()).unwrap();
     let report = evaluate(&truth, &prediction, None, &EvalOptions::default()).unwrap();

@@ -8,8 +8,9 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use frond::eval::{EvalOptions, GroundTruth, Prediction, align_to_ground_truth, evaluate};
-use frond::graph::pipeline::{SegmentOptions, Segmentation, segment_scene, write_segmentation};
+use frond::pipeline::ReconstructOptions;
 use frond::scene::{ModelFormat, Scene, SceneSource, stats, write_model};
+use frond::segment::SegmentOptions;
 use frond::synth::{Preset, SynthOptions, write_dataset};
 use frond::util::progress::Progress;
 
@@ -668,18 +669,15 @@ fn eval_dense(gt: &Path, dense: &Path, json: bool) -> Result<()> {
     Ok(())
 }
 
-fn run_segmentation(
-    scene_args: &SceneArgs,
-    params: &SegmentArgs,
-    out: &Path,
-) -> Result<(Scene, Segmentation)> {
+/// `frond segment`: the automatic segmentation's `segmentation.ply` and `segments.json`.
+fn run_segmentation(scene_args: &SceneArgs, params: &SegmentArgs, out: &Path) -> Result<()> {
     let options = params.options()?;
     let scene = load_scene(scene_args.source()?)?;
     let progress = BarProgress::new();
-    let segmentation = segment_scene(&scene, &options, &progress)
+    let segmentation = frond::segment::segment_scene(&scene, &options, &progress)
         .with_context(|| format!("segmenting {}", scene.source.model_dir.display()))?;
     progress.bar.finish_and_clear();
-    write_segmentation(out, &segmentation)
+    frond::pipeline::write_automatic_segmentation(&scene, &segmentation, out)
         .with_context(|| format!("writing segmentation to {}", out.display()))?;
     let t = &segmentation.timings;
     eprintln!(
@@ -698,7 +696,7 @@ fn run_segmentation(
         "timings: foreground {:.2} s, gradients {:.2} s, graph {:.2} s, partition {:.2} s, total {:.2} s",
         t.foreground, t.gradients, t.graph, t.partition, t.total
     );
-    Ok((scene, segmentation))
+    Ok(())
 }
 
 /// `SEGMENT` or `SEGMENT:IMAGE_ID`.
@@ -724,135 +722,69 @@ fn reconstruct(
     template: Option<(u32, Option<u32>)>,
     out: &Path,
 ) -> Result<()> {
-    let started = std::time::Instant::now();
-    let (scene, segmentation) = run_segmentation(scene_args, params, out)?;
-    let segmentation_summary = serde_json::to_value(&segmentation)?;
-    let class_counts = segmentation.class_counts();
-    let input = scene.source.model_dir.clone();
-    let mut session = frond::edit::Session::new(scene, segmentation);
-    let mut options = frond::leaf::LeafOptions::default();
+    let scene = load_scene(scene_args.source()?)?;
+    let mut options = ReconstructOptions {
+        segmentation: params.options()?,
+        ..Default::default()
+    };
     match fit {
         FitMode::Full => {}
-        FitMode::NoWarp => options.fit.use_boundary = false,
+        FitMode::NoWarp => options.leaves.fit.use_boundary = false,
         FitMode::Flat => {
-            options.fit.use_boundary = false;
-            options.fit.deform = false;
+            options.leaves.fit.use_boundary = false;
+            options.leaves.fit.deform = false;
         }
     }
     if let Some((segment, image_id)) = template {
-        let images = session.scene().reconstruction.images();
         let view = match image_id {
             None => None,
-            Some(id) => Some(images.iter().position(|i| i.id == id).with_context(|| {
+            Some(id) => Some(scene.reconstruction.image_position(id).with_context(|| {
                 format!("--template {segment}:{id}: no registered image has id {id}")
             })?),
         };
-        options.template = Some(frond::leaf::TemplatePick { segment, view });
+        options.leaves.template = Some(frond::leaf::TemplatePick { segment, view });
     }
     let progress = BarProgress::new();
-    let leaves = frond::leaf::reconstruct_leaves(&mut session, &options, &progress)
-        .context("reconstructing leaves")?;
+    let done =
+        frond::pipeline::reconstruct(&scene, &options, out, &progress).with_context(|| {
+            format!(
+                "reconstructing {} into {}",
+                scene.source.model_dir.display(),
+                out.display()
+            )
+        })?;
     progress.bar.finish_and_clear();
-    // The session's branches: the automatic skeleton, computed when the session started.
-    let branches = session.branches().clone();
-    let initial_skeleton = session.initial_skeleton().clone();
-    if let Some(error) = &initial_skeleton.error {
-        tracing::warn!("no automatic skeleton: {error}");
-    }
-    let skeleton_path = out.join("skeleton.json");
-    frond::util::atomic::write_atomic(
-        &skeleton_path,
-        serde_json::to_string_pretty(&frond::branch::plant::skeleton_records(&branches, 0.002, 8))?
-            .as_bytes(),
-    )
-    .with_context(|| format!("writing {}", skeleton_path.display()))?;
-    let frond::branch::plant::SessionPlant {
-        model,
-        attachment,
-        attach_seconds,
-    } = frond::branch::plant::session_plant(&session, &leaves);
-    let clock = std::time::Instant::now();
-    let export = model
-        .export(out)
-        .with_context(|| format!("exporting the plant model to {}", out.display()))?;
-    session
-        .write_outputs(out)
-        .with_context(|| format!("writing the segmentation to {}", out.display()))?;
-    let export_seconds = clock.elapsed().as_secs_f64();
+    let report = &done.report;
+    let counts = &report.counts;
     eprintln!(
-        "{} leaves fitted ({} skipped), {} triangles -> {}",
-        leaves.leaves.len(),
-        leaves.skipped.len(),
-        export.triangles,
+        "{} points, {} segments; {} leaves fitted ({} skipped), {} branches, {} triangles -> {}",
+        counts.points,
+        counts.segments,
+        counts.leaves_fitted,
+        counts.leaves_skipped,
+        counts.branches,
+        counts.triangles,
         out.display()
     );
-    let t = &leaves.timings;
+    let t = &report.timings;
     eprintln!(
-        "timings: generic leaf {:.2} s, boundaries {:.2} s, fitting {:.2} s, export {:.2} s",
-        t.template, t.boundaries, t.fitting, export_seconds
+        "timings: segmentation {:.2} s, skeleton {:.2} s, generic leaf {:.2} s, boundaries {:.2} s, fitting {:.2} s, export {:.2} s",
+        report.segmentation["timings"]["total"]
+            .as_f64()
+            .unwrap_or(0.0),
+        t.skeleton,
+        t.leaves.template,
+        t.leaves.boundaries,
+        t.leaves.fitting,
+        t.export
     );
-    let report = serde_json::json!({
-        "frond": env!("CARGO_PKG_VERSION"),
-        "input": input,
-        "stages": ["foreground", "segmentation", "skeleton", "boundaries", "leaves", "attachment", "export"],
-        "counts": {
-            "points": session.segmentation().points.len(),
-            "foreground": class_counts,
-            "segments": session.segments().iter().flatten().count(),
-            "leaves_fitted": leaves.leaves.len(),
-            "leaves_skipped": leaves.skipped.len(),
-            "branches": branches.branches.len(),
-            "petioles": attachment.petioles.len(),
-            "leaves_touching_branches": attachment.touching,
-            "leaves_posed": attachment.posed.len(),
-            "triangles": export.triangles,
-            "atlas_pages": export.atlas_pages,
-        },
-        "skeleton": initial_skeleton.stats,
-        "attachment": attachment,
-        "template": leaves.template_source.map(|t| serde_json::json!({
-            "segment": t.segment,
-            "image_id": session.scene().reconstruction.images()[t.view].id,
-        })),
-        "skipped": leaves.skipped,
-        "unusable_views": leaves.unusable_views,
-        "leaves": leaves.leaves.iter().map(|l| serde_json::json!({
-            "segment": l.segment,
-            "image_id": l.view.map(|v| session.scene().reconstruction.images()[v].id),
-            "points": l.fit.points,
-            "point_residual": l.fit.point_residual,
-            "length": l.fit.length,
-            "base": l.fit.base,
-            "tip": l.fit.tip,
-            "area": l.fit.area,
-            "icp": l.fit.icp,
-            "boundary_area": l.fit.boundary_area,
-            "outline_area": l.fit.outline_area,
-            "textured_fraction": l.fit.textured_fraction,
-            "notes": l.fit.notes,
-        })).collect::<Vec<_>>(),
-        "parameters": {"segmentation": session.segmentation().options, "leaves": options},
-        "segmentation": segmentation_summary,
-        "timings": {
-            "leaves": leaves.timings,
-            "skeleton": initial_skeleton.seconds,
-            "attachment": attach_seconds,
-            "export": export_seconds,
-            "total": started.elapsed().as_secs_f64(),
-        },
-        "files": export.files,
-    });
-    let path = out.join("report.json");
-    frond::util::atomic::write_atomic(&path, serde_json::to_string_pretty(&report)?.as_bytes())
-        .with_context(|| format!("writing {}", path.display()))?;
     Ok(())
 }
 
 fn replay(project: &Path, out: Option<&Path>) -> Result<()> {
     let progress = BarProgress::new();
-    let session = frond::edit::open_project(project, &progress)
+    let mut session = frond::edit::open_project(project, &progress)
         .with_context(|| format!("replaying {}", project.display()))?;
-    progress.bar.finish_and_clear();
     let out = out.map(Path::to_path_buf).unwrap_or_else(|| {
         let stem = project
             .file_stem()
@@ -860,19 +792,19 @@ fn replay(project: &Path, out: Option<&Path>) -> Result<()> {
             .unwrap_or_default();
         project.with_file_name(format!("{stem}_out"))
     });
-    session
-        .write_outputs(&out)
+    let options = frond::leaf::LeafOptions::default();
+    let leaves = session
+        .fit_leaves(&options, &progress)
+        .context("reconstructing the leaves")?;
+    let report = frond::pipeline::write_plant(&session.plant_state(), &leaves, &options, &out)
         .with_context(|| format!("writing {}", out.display()))?;
-    let (history, position) = session.history();
+    progress.bar.finish_and_clear();
     eprintln!(
-        "replayed {position} of {} edits; {} leaves -> {}",
-        history.len(),
-        session
-            .segments()
-            .iter()
-            .flatten()
-            .filter(|s| s.label == frond::graph::pipeline::SegmentLabel::Leaf)
-            .count(),
+        "replayed {} of {} edits; {} leaves fitted, {} branches -> {}",
+        report.edits.applied,
+        report.edits.history,
+        report.counts.leaves_fitted,
+        report.counts.branches,
         out.display()
     );
     Ok(())
@@ -881,11 +813,7 @@ fn replay(project: &Path, out: Option<&Path>) -> Result<()> {
 /// The scene path when it is a folder of photos without any COLMAP model.
 fn photos_folder(scene_args: &SceneArgs) -> Option<PathBuf> {
     let path = scene_args.path.as_ref()?;
-    if scene_args.model.is_some() || !path.is_dir() || SceneSource::locate(path).is_ok() {
-        return None;
-    }
-    let photos = frond::sfm::list_photos(path).ok()?;
-    (!photos.is_empty()).then(|| path.clone())
+    (scene_args.model.is_none() && frond::pipeline::is_photo_folder(path)).then(|| path.clone())
 }
 
 /// `frond sfm`: COLMAP on a folder of photos.
@@ -898,6 +826,11 @@ fn sfm(
     let report = frond::sfm::run_sfm(photos, out, options, &progress)
         .with_context(|| format!("structure from motion on {}", photos.display()))?;
     progress.bar.finish_and_clear();
+    print_sfm(&report, out);
+    Ok(report)
+}
+
+fn print_sfm(report: &frond::sfm::SfmReport, out: &Path) {
     println!(
         "COLMAP registered {}/{} photos ({} matching), {} points, {:.1} s; wrote {}",
         report.registered,
@@ -910,21 +843,24 @@ fn sfm(
     if !report.unregistered.is_empty() {
         eprintln!("not registered: {}", report.unregistered.join(", "));
     }
-    Ok(report)
 }
 
 /// `frond densify`: dense workspace from a COLMAP scene.
 fn densify(scene_args: &SceneArgs, options: &frond::mvs::DensifyOptions, out: &Path) -> Result<()> {
     let scene = load_scene(scene_args.source()?)?;
     let progress = BarProgress::new();
-    let (fused, report) = frond::mvs::densify(&scene, options, &progress)
-        .with_context(|| format!("densifying {}", scene.source.model_dir.display()))?;
+    let (report, points) = frond::pipeline::densify_workspace(&scene, options, out, &progress)
+        .with_context(|| {
+            format!(
+                "densifying {} into {}",
+                scene.source.model_dir.display(),
+                out.display()
+            )
+        })?;
     progress.bar.finish_and_clear();
-    let dense = frond::mvs::write_workspace(&scene, &fused, &report, options, out)
-        .with_context(|| format!("writing the dense workspace {}", out.display()))?;
     println!(
         "{} points ({:.1} views each) from {}/{} pairs, {:.1} s; wrote {}",
-        dense.points().len(),
+        points,
         report.mean_views_per_point,
         report.pairs_matched,
         report.pairs,
@@ -1259,7 +1195,7 @@ fn main() -> Result<()> {
             params,
         } => sfm(photos, &params.options()?, out).map(|_| ()),
         Command::Densify { scene, out, params } => densify(scene, &params.options()?, out),
-        Command::Segment { scene, out, params } => run_segmentation(scene, params, out).map(|_| ()),
+        Command::Segment { scene, out, params } => run_segmentation(scene, params, out),
         Command::Reconstruct {
             scene,
             sfm: sfm_args,
@@ -1270,17 +1206,28 @@ fn main() -> Result<()> {
             template,
         } => match photos_folder(scene) {
             Some(photos) => {
-                let sfm_out = out.join("sfm");
-                sfm(&photos, &sfm_args.options()?, &sfm_out)?;
-                let dense_out = out.join("dense");
-                let sparse_scene = SceneArgs {
-                    path: Some(sfm_out.join("dense")),
-                    model: None,
-                    images: None,
-                };
-                densify(&sparse_scene, &dense.options()?, &dense_out)?;
+                let progress = BarProgress::new();
+                let run = frond::pipeline::photos_to_scene(
+                    &photos,
+                    &sfm_args.options()?,
+                    &dense.options()?,
+                    out,
+                    &progress,
+                )
+                .with_context(|| format!("photos to a scene: {}", photos.display()))?;
+                progress.bar.finish_and_clear();
+                print_sfm(&run.sfm, &out.join("sfm"));
+                println!(
+                    "{} points ({:.1} views each) from {}/{} pairs, {:.1} s; wrote {}",
+                    run.dense_points,
+                    run.densify.mean_views_per_point,
+                    run.densify.pairs_matched,
+                    run.densify.pairs,
+                    run.densify.timings.values().sum::<f64>(),
+                    run.workspace.display()
+                );
                 let dense_scene = SceneArgs {
-                    path: Some(dense_out),
+                    path: Some(run.workspace),
                     model: None,
                     images: None,
                 };

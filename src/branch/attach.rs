@@ -323,6 +323,7 @@ mod tests {
                 .collect(),
             skipped: Vec::new(),
             unusable_views: Vec::new(),
+            boundaries: Default::default(),
             timings: LeafTimings::default(),
         }
     }

@@ -63,15 +63,7 @@ impl Frame {
     }
 }
 
-/// Any unit vector perpendicular to `v`.
-pub fn any_perpendicular(v: &Vector3<f64>) -> Vector3<f64> {
-    let helper = if v.x.abs() < 0.9 {
-        Vector3::x()
-    } else {
-        Vector3::y()
-    };
-    v.cross(&helper).normalize()
-}
+pub use crate::util::geometry::any_perpendicular;
 
 /// Rotation-minimising frames along sampled points with tangents (double reflection method,
 /// Wang, Jüttler, Zheng & Liu 2008). The first normal is `initial_normal` projected off the

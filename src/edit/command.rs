@@ -2,8 +2,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::graph::pipeline::SegmentLabel;
 use crate::scene::ImageId;
+use crate::segment::SegmentLabel;
 
 /// A position clicked in a view: image id and pixel (COLMAP convention).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

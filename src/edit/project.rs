@@ -10,8 +10,8 @@ use serde::{Deserialize, Serialize};
 
 use super::command::Command;
 use super::session::{EditError, Session};
-use crate::graph::pipeline::{SegmentError, SegmentOptions, segment_scene};
 use crate::scene::{Scene, SceneError, SceneSource};
+use crate::segment::{SegmentError, SegmentOptions, segment_scene};
 use crate::util::atomic::write_atomic;
 use crate::util::progress::Progress;
 

@@ -2,10 +2,9 @@
 //! with exact undo and redo.
 
 use std::collections::{BTreeMap, HashMap, HashSet};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 use nalgebra::Point2;
-use serde::{Deserialize, Serialize};
 
 use super::branches::{self, BranchEditError, SnapPoints, StrokeView};
 use super::command::{BranchStroke, BranchTarget, Command, PixelRef, ViewCamera};
@@ -13,9 +12,13 @@ use super::stroke::{Side, Stroke};
 use crate::branch::skeleton::SkeletonStats;
 use crate::branch::{BranchPoint, BranchTree};
 use crate::graph::maxflow::{MaxFlow, MaxFlowError, Segment as CutSide};
-use crate::graph::pipeline::{SegmentLabel, Segmentation};
+use crate::pipeline::{EditCount, PlantState, SkeletonRun};
 use crate::scene::{ImageId, Scene};
-use crate::segment::boundary::{Boundary, BoundaryError, BoundaryOptions, Oversegmentation};
+use crate::segment::boundary::{Boundary, BoundaryError, BoundaryOptions};
+use crate::segment::labels::Labels;
+pub use crate::segment::labels::SegmentState;
+use crate::segment::views::{Projected, ViewCache};
+use crate::segment::{SegmentLabel, Segmentation};
 
 /// ε of the graph-cut smoothness term `1 / (d² + ε)` (seed 004 §5.3).
 pub const GRAPH_CUT_EPSILON: f64 = 1e-4;
@@ -24,13 +27,6 @@ pub const PICK_TOLERANCE_PX: f64 = 12.0;
 /// Points projecting closer than this to a split stroke are left to the graph cut (pixels);
 /// farther ones are seeded on their side.
 pub const STROKE_MARGIN_PX: f64 = 8.0;
-
-/// The state of a segment.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct SegmentState {
-    pub label: SegmentLabel,
-    pub confirmed: bool,
-}
 
 /// Why an edit could not be applied (the session is unchanged).
 #[derive(Debug, thiserror::Error)]
@@ -64,16 +60,6 @@ pub enum EditError {
     Branch(#[from] BranchEditError),
 }
 
-/// How the session's first branch tree (the automatic skeleton of the automatic labels) came
-/// out.
-#[derive(Clone, Debug, Serialize)]
-pub struct InitialSkeleton {
-    pub stats: Option<SkeletonStats>,
-    /// Why there is none, when there is none.
-    pub error: Option<String>,
-    pub seconds: f64,
-}
-
 /// Everything an applied command changed, to undo and redo it exactly.
 #[derive(Clone, Debug, Default)]
 struct Change {
@@ -94,14 +80,6 @@ struct Applied {
     change: Change,
 }
 
-/// A point projected into a view.
-#[derive(Clone, Copy, Debug)]
-struct Projected {
-    point: u32,
-    uv: Point2<f64>,
-    depth: f64,
-}
-
 /// The editing session (see the module docs).
 pub struct Session {
     scene: Scene,
@@ -110,18 +88,15 @@ pub struct Session {
     node_of: Vec<Option<u32>>,
     /// Per graph node: `(neighbour node, edge index)`.
     adjacency: Vec<Vec<(u32, u32)>>,
-    segment_of: Vec<i32>,
-    segments: Vec<Option<SegmentState>>,
+    labels: Labels,
     added_edges: Vec<(u32, u32)>,
     cut_edges: HashSet<usize>,
     history: Vec<Applied>,
     cursor: usize,
-    projections: Mutex<HashMap<usize, Arc<Vec<Projected>>>>,
-    oversegmentations: Mutex<HashMap<usize, Arc<Oversegmentation>>>,
-    boundaries: HashMap<(u32, usize), Boundary>,
-    boundary_options: BoundaryOptions,
+    views: ViewCache,
+    boundaries: BTreeMap<(u32, usize), Boundary>,
     branches: BranchTree,
-    initial_skeleton: InitialSkeleton,
+    initial_skeleton: SkeletonRun,
 }
 
 impl Session {
@@ -138,55 +113,26 @@ impl Session {
             adjacency[edge.a as usize].push((edge.b, index as u32));
             adjacency[edge.b as usize].push((edge.a, index as u32));
         }
-        let segment_of = segmentation
-            .point_segment
-            .iter()
-            .map(|s| s.map_or(-1, |s| s as i32))
-            .collect();
-        let segments = segmentation
-            .segments
-            .iter()
-            .map(|s| {
-                Some(SegmentState {
-                    label: s.label,
-                    confirmed: false,
-                })
-            })
-            .collect();
+        let labels = Labels::automatic(&segmentation);
         let mut session = Self {
             scene,
             segmentation,
             node_of,
             adjacency,
-            segment_of,
-            segments,
+            labels,
             added_edges: Vec::new(),
             cut_edges: HashSet::new(),
             history: Vec::new(),
             cursor: 0,
-            projections: Mutex::new(HashMap::new()),
-            oversegmentations: Mutex::new(HashMap::new()),
-            boundaries: HashMap::new(),
-            boundary_options: BoundaryOptions::default(),
+            views: ViewCache::new(BoundaryOptions::default()),
+            boundaries: BTreeMap::new(),
             branches: BranchTree::default(),
-            initial_skeleton: InitialSkeleton {
-                stats: None,
-                error: None,
-                seconds: 0.0,
-            },
+            initial_skeleton: SkeletonRun::default(),
         };
-        let clock = std::time::Instant::now();
-        match crate::branch::plant::session_skeleton(&session, &Default::default()) {
-            Ok((tree, stats)) => {
-                session.branches = tree;
-                session.initial_skeleton.stats = Some(stats);
-            }
-            Err(e) => {
-                tracing::info!("no automatic skeleton: {e}");
-                session.initial_skeleton.error = Some(e.to_string());
-            }
-        }
-        session.initial_skeleton.seconds = clock.elapsed().as_secs_f64();
+        let (tree, run) =
+            crate::pipeline::automatic_skeleton(&session.segmentation, &session.labels);
+        session.branches = tree;
+        session.initial_skeleton = run;
         session
     }
 
@@ -196,7 +142,7 @@ impl Session {
     }
 
     /// How the first branch tree came out.
-    pub fn initial_skeleton(&self) -> &InitialSkeleton {
+    pub fn initial_skeleton(&self) -> &SkeletonRun {
         &self.initial_skeleton
     }
 
@@ -244,7 +190,10 @@ impl Session {
     /// What branch strokes snap to: non-leaf plant points; in a photo, those it sees.
     fn snap_points(&self, view: Option<usize>) -> SnapPoints<'_> {
         let points = &self.segmentation.points;
-        let mut candidates = crate::branch::plant::skeleton_point_indices(self);
+        let mut candidates = crate::branch::plant::skeleton_point_indices(
+            &self.segmentation.foreground,
+            &self.labels,
+        );
         if let Some(view) = view {
             candidates.retain(|&p| {
                 points.views[p as usize]
@@ -264,9 +213,7 @@ impl Session {
         let tree = &self.branches;
         let edited = match command {
             Command::AutomaticSkeleton => {
-                crate::branch::plant::session_skeleton(self, &Default::default())
-                    .map_err(BranchEditError::from)?
-                    .0
+                self.automatic_skeleton().map_err(BranchEditError::from)?.0
             }
             Command::DrawBranch { stroke, radius } => match stroke {
                 BranchStroke::Image { image_id, stroke } => {
@@ -327,34 +274,67 @@ impl Session {
         &self.segmentation
     }
 
+    /// The session's plant as plain data, for the pipeline's leaf and output stages.
+    pub fn plant_state(&self) -> PlantState<'_> {
+        PlantState {
+            scene: &self.scene,
+            segmentation: &self.segmentation,
+            labels: &self.labels,
+            branches: &self.branches,
+            skeleton: &self.initial_skeleton,
+            views: &self.views,
+            boundaries: &self.boundaries,
+            edits: EditCount {
+                history: self.history.len(),
+                applied: self.cursor,
+            },
+        }
+    }
+
+    /// The current labels.
+    pub fn labels(&self) -> &Labels {
+        &self.labels
+    }
+
     /// Current segment id per point (−1 = none).
     pub fn segment_of(&self) -> &[i32] {
-        &self.segment_of
+        &self.labels.segment_of
     }
 
     /// State of every segment id (`None` for ids whose points were merged away).
     pub fn segments(&self) -> &[Option<SegmentState>] {
-        &self.segments
+        &self.labels.segments
+    }
+
+    /// The projections and superpixels of the views, shared by edits and leaf boundaries.
+    pub fn views(&self) -> &ViewCache {
+        &self.views
+    }
+
+    /// Every cached image boundary, by (segment, view).
+    pub fn boundaries(&self) -> &BTreeMap<(u32, usize), Boundary> {
+        &self.boundaries
+    }
+
+    /// The automatic skeleton of the current labels' non-leaf points.
+    fn automatic_skeleton(
+        &self,
+    ) -> Result<(BranchTree, SkeletonStats), crate::branch::skeleton::SkeletonError> {
+        crate::branch::plant::automatic_plant_skeleton(
+            &self.segmentation,
+            &self.labels,
+            &Default::default(),
+        )
     }
 
     /// `leaf_id` per point: the segment id of leaf segments, −1 otherwise.
     pub fn leaf_ids(&self) -> Vec<i64> {
-        self.segment_of
-            .iter()
-            .map(
-                |&s| match self.segments.get(s.max(0) as usize).copied().flatten() {
-                    Some(state) if s >= 0 && state.label == SegmentLabel::Leaf => s as i64,
-                    _ => -1,
-                },
-            )
-            .collect()
+        self.labels.leaf_ids()
     }
 
     /// Points of a segment.
     pub fn members(&self, segment: u32) -> Vec<u32> {
-        (0..self.segment_of.len() as u32)
-            .filter(|&p| self.segment_of[p as usize] == segment as i32)
-            .collect()
+        self.labels.members(segment)
     }
 
     /// The commands applied so far (up to the undo position) and the redo-able ones after.
@@ -387,29 +367,8 @@ impl Session {
 
     /// Projections of the points seen in a view (cached).
     fn projected(&self, view: usize) -> Arc<Vec<Projected>> {
-        let mut cache = self.projections.lock().unwrap_or_else(|e| e.into_inner());
-        cache
-            .entry(view)
-            .or_insert_with(|| {
-                let model = &self.scene.reconstruction;
-                let image = &model.images()[view];
-                let camera = model.camera_of(image);
-                let points = &self.segmentation.points;
-                Arc::new(
-                    (0..points.len())
-                        .filter(|&p| points.views[p].binary_search(&(view as u32)).is_ok())
-                        .filter_map(|p| {
-                            let point_camera = image.camera_from_world * points.positions[p];
-                            camera.project(&point_camera.coords).map(|uv| Projected {
-                                point: p as u32,
-                                uv,
-                                depth: point_camera.z,
-                            })
-                        })
-                        .collect(),
-                )
-            })
-            .clone()
+        self.views
+            .projected(&self.scene, &self.segmentation.points, view)
     }
 
     /// The point of a segment under a click: nearest projection within the tolerance, the
@@ -420,8 +379,8 @@ impl Session {
         let projected = self.projected(view);
         let candidates: Vec<(f64, f64, u32)> = projected
             .iter()
-            .filter(|p| self.segment_of[p.point as usize] >= 0)
-            .map(|p| ((p.uv - click).norm(), p.depth, p.point))
+            .filter(|p| self.labels.segment_of[p.point as usize] >= 0)
+            .map(|p| ((p.uv_image - click).norm(), p.depth_camera, p.point))
             .filter(|(d, _, _)| *d <= PICK_TOLERANCE_PX)
             .collect();
         let nearest = candidates.iter().map(|c| c.0).fold(f64::INFINITY, f64::min);
@@ -441,7 +400,7 @@ impl Session {
     /// The segment under a click.
     pub fn pick_segment(&self, at: &PixelRef) -> Result<u32, EditError> {
         let point = self.pick(at)?;
-        Ok(self.segment_of[point as usize] as u32)
+        Ok(self.labels.segment_of[point as usize] as u32)
     }
 
     /// Applies a command; on error nothing changes. Redo-able commands after the undo
@@ -494,9 +453,9 @@ impl Session {
     fn forward(&mut self, change: &Change) {
         self.forget_boundaries(change);
         for &(point, _, after) in &change.points {
-            self.segment_of[point as usize] = after;
+            self.labels.segment_of[point as usize] = after;
         }
-        self.segments = change.segments_after.clone();
+        self.labels.segments = change.segments_after.clone();
         self.added_edges.extend_from_slice(&change.added_edges);
         self.cut_edges.extend(change.cut_edges.iter().copied());
         if let Some(trees) = &change.branches {
@@ -507,9 +466,9 @@ impl Session {
     fn backward(&mut self, change: &Change) {
         self.forget_boundaries(change);
         for &(point, before, _) in change.points.iter().rev() {
-            self.segment_of[point as usize] = before;
+            self.labels.segment_of[point as usize] = before;
         }
-        self.segments = change.segments_before.clone();
+        self.labels.segments = change.segments_before.clone();
         let keep = self.added_edges.len() - change.added_edges.len();
         self.added_edges.truncate(keep);
         for edge in &change.cut_edges {
@@ -523,8 +482,8 @@ impl Session {
     /// Computes what a command would change, without changing anything.
     fn plan(&mut self, command: &Command) -> Result<Change, EditError> {
         let mut change = Change {
-            segments_before: self.segments.clone(),
-            segments_after: self.segments.clone(),
+            segments_before: self.labels.segments.clone(),
+            segments_after: self.labels.segments.clone(),
             ..Change::default()
         };
         if let Some(edited) = self.plan_branches(command)? {
@@ -558,7 +517,10 @@ impl Session {
             }
             Command::MergeByClick { first, second } => {
                 let (a, b) = (self.pick(first)?, self.pick(second)?);
-                let (sa, sb) = (self.segment_of[a as usize], self.segment_of[b as usize]);
+                let (sa, sb) = (
+                    self.labels.segment_of[a as usize],
+                    self.labels.segment_of[b as usize],
+                );
                 if sa == sb {
                     return Err(EditError::SameSegment);
                 }
@@ -636,8 +598,8 @@ impl Session {
         // The segment the stroke runs over: most points within 20 px of it.
         let mut votes: BTreeMap<i32, usize> = BTreeMap::new();
         for p in projected.iter() {
-            let s = self.segment_of[p.point as usize];
-            if s >= 0 && stroke.distance(&p.uv) <= 20.0 {
+            let s = self.labels.segment_of[p.point as usize];
+            if s >= 0 && stroke.distance(&p.uv_image) <= 20.0 {
                 *votes.entry(s).or_insert(0) += 1;
             }
         }
@@ -655,7 +617,7 @@ impl Session {
         let uv: HashMap<u32, Point2<f64>> = projected
             .iter()
             .filter(|p| local.contains_key(&p.point))
-            .map(|p| (p.point, p.uv))
+            .map(|p| (p.point, p.uv_image))
             .collect();
         // Seeds: points seen in the view between the margin and the stroke's reach; points
         // farther away follow the graph (the stroke's extension is only a guess there).
@@ -735,44 +697,46 @@ impl Session {
         Ok(())
     }
 
-    /// Superpixels of a view (computed once, cached).
-    fn oversegmentation(&self, view: usize) -> Result<Arc<Oversegmentation>, EditError> {
-        if let Some(done) = self
-            .oversegmentations
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .get(&view)
-        {
-            return Ok(done.clone());
-        }
-        let image = &self.scene.reconstruction.images()[view];
-        let mat = self
-            .scene
-            .load_image(image)
-            .map_err(|e| BoundaryError::Image(e.to_string()))?;
-        let computed = Arc::new(Oversegmentation::compute(&mat, &self.boundary_options)?);
-        self.oversegmentations
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .insert(view, computed.clone());
-        Ok(computed)
-    }
-
     /// The image boundary of a segment in a view (seed 004 §5.4), computed without touching
     /// the cache (callable from many threads at once; see [`Session::store_boundary`]).
     pub fn boundary_in_view(&self, segment: u32, view: usize) -> Result<Boundary, EditError> {
-        let superpixels = self.oversegmentation(view)?;
-        let projected = self.projected(view);
-        let (foreground, background): (Vec<&Projected>, Vec<&Projected>) = projected
-            .iter()
-            .partition(|p| self.segment_of[p.point as usize] == segment as i32);
-        let uv = |v: Vec<&Projected>| v.into_iter().map(|p| p.uv).collect::<Vec<_>>();
-        Ok(superpixels.boundary(&uv(foreground), &uv(background), &self.boundary_options)?)
+        Ok(self.views.boundary(
+            &self.scene,
+            &self.segmentation.points,
+            &self.labels.segment_of,
+            segment,
+            view,
+        )?)
     }
 
     /// Caches a boundary computed by [`Session::boundary_in_view`] for the current segments.
     pub fn store_boundary(&mut self, segment: u32, view: usize, boundary: Boundary) {
         self.boundaries.insert((segment, view), boundary);
+    }
+
+    /// Reconstructs every leaf segment under the current labels (seed 004 §6) and keeps the
+    /// image boundaries it computed.
+    pub fn fit_leaves(
+        &mut self,
+        options: &crate::leaf::LeafOptions,
+        progress: &dyn crate::util::progress::Progress,
+    ) -> Result<crate::leaf::LeafReconstruction, crate::leaf::LeafError> {
+        let leaves = crate::pipeline::fit_leaves(&self.plant_state(), options, progress)?;
+        self.store_boundaries(
+            leaves
+                .boundaries
+                .iter()
+                .map(|(key, boundary)| (*key, boundary.clone())),
+        );
+        Ok(leaves)
+    }
+
+    /// Caches the boundaries a leaf reconstruction computed for the current segments.
+    pub fn store_boundaries(
+        &mut self,
+        boundaries: impl IntoIterator<Item = ((u32, usize), Boundary)>,
+    ) {
+        self.boundaries.extend(boundaries);
     }
 
     /// Computes (and caches) the image boundary of a segment in a view (seed 004 §5.4).
@@ -789,7 +753,8 @@ impl Session {
         use rayon::prelude::*;
         views
             .par_iter()
-            .try_for_each(|&view| self.oversegmentation(view).map(|_| ()))
+            .try_for_each(|&view| self.views.oversegmentation(&self.scene, view).map(|_| ()))
+            .map_err(EditError::from)
     }
 
     /// The view where a segment's boundary is best: among the views seeing most of its
@@ -816,68 +781,5 @@ impl Session {
             }
         }
         Ok(best.map(|(_, v)| v))
-    }
-}
-
-impl Session {
-    /// Writes the current labels: `segmentation.ply` (every input point with its `leaf_id`,
-    /// the segment id of leaf segments) and `segments.json` (every live segment with label,
-    /// confirmation, size and computed boundaries).
-    pub fn write_outputs(&self, out: &std::path::Path) -> std::io::Result<()> {
-        std::fs::create_dir_all(out)?;
-        let points = &self.segmentation.points;
-        let ply = crate::model::segmentation_ply(
-            &points.positions,
-            &points.colors,
-            &points.point_ids,
-            &self.leaf_ids(),
-        );
-        crate::model::write_segmentation_ply(&out.join("segmentation.ply"), &ply)?;
-        let mut sizes = vec![0usize; self.segments.len()];
-        for &s in &self.segment_of {
-            if s >= 0 {
-                sizes[s as usize] += 1;
-            }
-        }
-        let segments: Vec<serde_json::Value> = self
-            .segments
-            .iter()
-            .enumerate()
-            .filter_map(|(id, state)| {
-                let state = state.as_ref()?;
-                (sizes[id] > 0).then(|| {
-                    let boundaries: Vec<serde_json::Value> = self
-                        .boundaries
-                        .iter()
-                        .filter(|((s, _), _)| *s == id as u32)
-                        .map(|((_, view), b)| {
-                            serde_json::json!({
-                                "image_id": self.scene.reconstruction.images()[*view].id,
-                                "area_px": b.area_px,
-                                "polygon": b.polygon,
-                            })
-                        })
-                        .collect();
-                    serde_json::json!({
-                        "id": id,
-                        "label": state.label,
-                        "confirmed": state.confirmed,
-                        "points": sizes[id],
-                        "boundaries": boundaries,
-                    })
-                })
-            })
-            .collect();
-        let (history, position) = self.history();
-        let json = serde_json::json!({
-            "format": "frond segments 1",
-            "points": points.len(),
-            "leaves": segments.iter().filter(|s| s["label"] == "leaf").count(),
-            "segments": segments,
-            "edits": history.len(),
-            "undo_position": position,
-        });
-        let text = serde_json::to_string_pretty(&json).map_err(std::io::Error::other)?;
-        crate::util::atomic::write_atomic(&out.join("segments.json"), text.as_bytes())
     }
 }

@@ -2,7 +2,7 @@
 
 use nalgebra::Point3;
 
-use super::{SkeletonBranch, SkeletonScores};
+use super::{SkeletonRecord, SkeletonScores};
 use crate::branch::spline::point_segment_distance;
 use crate::mesh::{TriMesh, point_triangle_distance};
 use crate::util::rng::Rng;
@@ -77,7 +77,7 @@ fn distance_to_polylines(p: &Point3<f64>, lines: &[Vec<Point3<f64>>]) -> f64 {
 }
 
 /// Scores a predicted skeleton against the GT branches (see [`SkeletonScores`]).
-pub fn score_skeleton(gt: &[SkeletonBranch], predicted: &[SkeletonBranch]) -> SkeletonScores {
+pub fn score_skeleton(gt: &[SkeletonRecord], predicted: &[SkeletonRecord]) -> SkeletonScores {
     let lines: Vec<Vec<Point3<f64>>> = predicted
         .iter()
         .map(|b| b.centerline.iter().map(|c| Point3::from(*c)).collect())
@@ -94,9 +94,9 @@ pub fn score_skeleton(gt: &[SkeletonBranch], predicted: &[SkeletonBranch]) -> Sk
             / stem.centerline.len() as f64;
         Some(mean / stem.mean_radius().max(1e-9))
     });
-    let eligible: Vec<&SkeletonBranch> = gt
+    let eligible: Vec<&SkeletonRecord> = gt
         .iter()
-        .filter(|b| b.length() > 10.0 * b.mean_radius())
+        .filter(|b| b.centerline_length() > 10.0 * b.mean_radius())
         .collect();
     let matched = eligible
         .iter()
@@ -170,11 +170,14 @@ mod tests {
 
     #[test]
     fn skeleton_scores_a_perfect_and_a_shifted_prediction() {
-        let stem = SkeletonBranch {
+        let stem = SkeletonRecord {
             id: 0,
             parent: None,
+            parent_fraction: 0.0,
+            control_points: Vec::new(),
             radius_start: 0.01,
             radius_end: 0.01,
+            length: 0.49,
             centerline: (0..50).map(|k| [0.0, 0.0, k as f64 * 0.01]).collect(),
         };
         let gt = vec![stem.clone()];

@@ -108,35 +108,14 @@ pub struct GtLeafRecord {
     pub mesh: String,
 }
 
-/// One branch skeleton (GT `branches.json` or predicted `skeleton.json`).
-#[derive(Clone, Debug, Deserialize, Serialize)]
-pub struct SkeletonBranch {
-    pub id: u32,
-    #[serde(default)]
-    pub parent: Option<u32>,
-    pub radius_start: f64,
-    pub radius_end: f64,
-    pub centerline: Vec<[f64; 3]>,
-}
-
-impl SkeletonBranch {
-    pub fn length(&self) -> f64 {
-        self.centerline
-            .windows(2)
-            .map(|w| (Point3::from(w[1]) - Point3::from(w[0])).norm())
-            .sum()
-    }
-    pub fn mean_radius(&self) -> f64 {
-        0.5 * (self.radius_start + self.radius_end)
-    }
-}
+pub use crate::branch::plant::{SkeletonFile, SkeletonRecord};
 
 /// Everything under a synthetic dataset's `gt/`.
 pub struct GroundTruth {
     pub root: PathBuf,
     pub points: LabelledPoints,
     pub leaves: Vec<(GtLeafRecord, TriMesh)>,
-    pub branches: Vec<SkeletonBranch>,
+    pub branches: Vec<SkeletonRecord>,
     pub surface_samples: LabelledPoints,
     pub plant_height: f64,
 }
@@ -156,7 +135,9 @@ impl GroundTruth {
             let mesh = TriMesh::read_ply(&gt.join(&record.mesh))?;
             leaves.push((record, mesh));
         }
-        let branches: Vec<SkeletonBranch> = read_json(&gt.join("branches.json"))?;
+        let branches = SkeletonFile::read(&gt.join("branches.json"))
+            .map_err(|e| input_error(&gt.join("branches.json"), e.to_string()))?
+            .branches;
         let surface_samples = read_labelled_points(&gt.join("surface_samples.ply"))?;
         let meta: serde_json::Value = read_json(&root.join("meta.json"))?;
         let plant_height = meta["plant"]["height"]
@@ -179,7 +160,7 @@ pub struct Prediction {
     /// Leaf meshes by segment id (`leaf_NNN` nodes).
     pub leaf_meshes: BTreeMap<i64, TriMesh>,
     pub branch_meshes: usize,
-    pub skeleton: Option<Vec<SkeletonBranch>>,
+    pub skeleton: Option<Vec<SkeletonRecord>>,
 }
 
 impl Prediction {
@@ -203,7 +184,11 @@ impl Prediction {
         }
         let skeleton_path = out.join("skeleton.json");
         let skeleton = if skeleton_path.is_file() {
-            Some(read_json(&skeleton_path)?)
+            Some(
+                SkeletonFile::read(&skeleton_path)
+                    .map_err(|e| input_error(&skeleton_path, e.to_string()))?
+                    .branches,
+            )
         } else {
             None
         };

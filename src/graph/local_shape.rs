@@ -106,6 +106,7 @@ mod tests {
             colors: vec![[0; 3]; n],
             views: vec![vec![0]; n],
             point_ids: (0..n as u64).collect(),
+            id_kind: Default::default(),
         }
     }
 

@@ -8,13 +8,11 @@
 //! then split by recursive normalized cuts ([`ncut`]).
 
 pub mod components;
-pub mod foreground;
 pub mod gradient;
 pub mod lanczos;
 pub mod local_shape;
 pub mod maxflow;
 pub mod ncut;
-pub mod pipeline;
 pub mod points;
 pub mod shape;
 #[cfg(test)]

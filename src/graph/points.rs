@@ -5,6 +5,16 @@ use nalgebra::Point3;
 
 use crate::scene::{Reconstruction, Scene};
 
+/// What a point set's `point_ids` are.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PointIds {
+    /// COLMAP point3D ids of the scene's model.
+    #[default]
+    ModelPoint3D,
+    /// Rows of `fused.ply` (dense points that are not the model's points).
+    FusedRow,
+}
+
 /// Points with visibility, indexed 0..n. View indices refer to `Reconstruction::images()`.
 #[derive(Clone, Debug, Default)]
 pub struct PointSet {
@@ -12,8 +22,9 @@ pub struct PointSet {
     pub colors: Vec<[u8; 3]>,
     /// Sorted, deduplicated view indices per point.
     pub views: Vec<Vec<u32>>,
-    /// COLMAP point ids (sparse input) or positions in fused.ply (dense input).
+    /// Each point's id in the input (see `id_kind`).
     pub point_ids: Vec<u64>,
+    pub id_kind: PointIds,
 }
 
 impl PointSet {
@@ -44,7 +55,10 @@ impl PointSet {
         set
     }
 
-    /// Dense points when the scene has them (with visibility), else the model's points.
+    /// Dense points when the scene has them (with visibility), else the model's points. Dense
+    /// points keep the model's point3D ids when they are the model's points (row `i` of
+    /// `fused.ply` is point3D `i + 1` at the same position, as in Frond's dense workspaces);
+    /// otherwise their ids are their rows in `fused.ply`.
     pub fn from_scene(scene: &Scene) -> Self {
         let Some(dense) = scene.dense.as_ref().filter(|d| !d.visible_in.is_empty()) else {
             return Self::from_reconstruction(&scene.reconstruction);
@@ -63,18 +77,40 @@ impl PointSet {
             set.views.push(views);
             set.point_ids.push(i as u64);
         }
+        set.id_kind = PointIds::FusedRow;
+        if fused_rows_are_model_points(&set.positions, model) {
+            set.id_kind = PointIds::ModelPoint3D;
+            for id in &mut set.point_ids {
+                *id += 1;
+            }
+        }
         set
     }
 
-    /// A subset in the given order.
+    /// A subset in the given order (ids keep their kind).
     pub fn subset(&self, indices: &[usize]) -> Self {
         Self {
             positions: indices.iter().map(|&i| self.positions[i]).collect(),
             colors: indices.iter().map(|&i| self.colors[i]).collect(),
             views: indices.iter().map(|&i| self.views[i].clone()).collect(),
             point_ids: indices.iter().map(|&i| self.point_ids[i]).collect(),
+            id_kind: self.id_kind,
         }
     }
+}
+
+/// Whether row `i` of the fused points is the model's point3D `i + 1` (same position to
+/// float precision) for every row.
+fn fused_rows_are_model_points(positions: &[Point3<f64>], model: &Reconstruction) -> bool {
+    if positions.is_empty() || model.points().len() != positions.len() {
+        return false;
+    }
+    positions.iter().enumerate().all(|(i, p)| {
+        model.point(i as u64 + 1).is_some_and(|q| {
+            let tolerance = 1e-5 * (1.0 + p.coords.norm());
+            (q.position_world - p).norm() <= tolerance
+        })
+    })
 }
 
 /// Views seen by both sorted lists (merge intersection).

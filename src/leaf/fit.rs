@@ -10,6 +10,7 @@ use super::template::LeafTemplate;
 use crate::graph::shape::Shape;
 use crate::mesh::TriMesh;
 use crate::util::polygon::{inside_polygon, polygon_area};
+use crate::util::stats::quantile;
 
 /// Fitting settings.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -426,11 +427,6 @@ pub struct FittedLeaf {
     pub notes: Vec<String>,
 }
 
-fn percentile(values: &mut [f64], q: f64) -> f64 {
-    values.sort_by(f64::total_cmp);
-    values[((values.len() - 1) as f64 * q).round() as usize]
-}
-
 /// Intersects the viewing ray of a pixel with the leaf plane; `None` for rays nearly parallel
 /// to the plane or hitting it behind the camera.
 fn back_project(
@@ -538,8 +534,8 @@ pub fn leaf_frame(
         .iter()
         .map(|p| (p - shape.centroid).dot(&x_axis))
         .collect();
-    let lo = percentile(&mut along, 0.02);
-    let hi = percentile(&mut along, 0.98);
+    let lo = quantile(&mut along, 0.02);
+    let hi = quantile(&mut along, 0.98);
     let ends = [shape.centroid + x_axis * lo, shape.centroid + x_axis * hi];
     // What the leaf grows from: a branch ending within a quarter of the leaf's length of one
     // of its ends (its petiole); else the plant's axis (the skeleton may miss the leaf's
@@ -612,8 +608,8 @@ pub fn fit_leaf(
     // Flat fit: scale the template to the points' extent along the two axes.
     let mut xs: Vec<f64> = samples.iter().map(|s| s.0.x).collect();
     let mut ys: Vec<f64> = samples.iter().map(|s| s.0.y).collect();
-    let (x_lo, x_hi) = (percentile(&mut xs, 0.01), percentile(&mut xs, 0.99));
-    let (y_lo, y_hi) = (percentile(&mut ys, 0.01), percentile(&mut ys, 0.99));
+    let (x_lo, x_hi) = (quantile(&mut xs, 0.01), quantile(&mut xs, 0.99));
+    let (y_lo, y_hi) = (quantile(&mut ys, 0.01), quantile(&mut ys, 0.99));
     // Extend by half the mean point spacing: points stop short of the margin.
     let area_estimate = (x_hi - x_lo).max(1e-9) * (y_hi - y_lo).max(1e-9) * 0.7;
     let half_spacing = 0.5 * (area_estimate / points.len() as f64).sqrt();

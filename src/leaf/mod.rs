@@ -1,10 +1,12 @@
 //! Model-based leaf reconstruction (seed 004 §6): a generic leaf extracted from one sample
 //! segment ([`template`]) is fitted to every leaf segment ([`fit`]).
 //!
-//! [`reconstruct_leaves`] drives it from an editing session: it picks the sample leaf (the
-//! user's, or automatically the most fronto-parallel, best-segmented large leaf), computes each
-//! leaf's image boundary in its best view, fits, and collects the leaves and the segments that
-//! could not be posed (with the reason) for the branch stage.
+//! [`reconstruct_leaves`] takes a [`LeafInput`] (the scene, its points, the current labels,
+//! the plant's axis and branch tips, the per-view cache) and returns a [`LeafReconstruction`]:
+//! it picks the sample leaf (the user's, or automatically the most fronto-parallel,
+//! best-segmented large leaf), computes each leaf's image boundary in its best views, fits, and
+//! collects the leaves, the boundaries it computed, and the segments that could not be posed
+//! (with the reason) for the branch stage.
 
 pub mod fit;
 pub mod template;
@@ -20,12 +22,27 @@ pub use fit::{
 };
 pub use template::LeafTemplate;
 
-use crate::edit::{EditError, Session};
-use crate::graph::pipeline::SegmentLabel;
-use crate::scene::ImageFileStatus;
-use crate::segment::boundary::Boundary;
+use crate::graph::points::PointSet;
+use crate::scene::{ImageFileStatus, Scene};
+use crate::segment::boundary::{Boundary, BoundaryError};
+use crate::segment::{Labels, SegmentLabel, ViewCache};
 use crate::util::polygon;
 use crate::util::progress::Progress;
+
+/// What the leaf stage reads (plain data; see the module docs).
+#[derive(Clone, Copy)]
+pub struct LeafInput<'a> {
+    pub scene: &'a Scene,
+    pub points: &'a PointSet,
+    pub labels: &'a Labels,
+    /// The plant's up direction, axis and branch tips.
+    pub plant: &'a PlantContext,
+    /// Projections and superpixels per view (shared with the editing session).
+    pub views: &'a ViewCache,
+}
+
+/// Image boundaries by (segment, view index).
+pub type Boundaries = BTreeMap<(u32, usize), Boundary>;
 
 /// Which segment and view the generic leaf is taken from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -88,6 +105,9 @@ pub struct LeafReconstruction {
     pub skipped: Vec<SkippedLeaf>,
     /// Views whose photos could not be used for boundaries or textures, and why.
     pub unusable_views: Vec<UnusableView>,
+    /// Every image boundary computed on the way, for the caller to keep.
+    #[serde(skip)]
+    pub boundaries: Boundaries,
     pub timings: LeafTimings,
 }
 
@@ -95,7 +115,7 @@ pub struct LeafReconstruction {
 #[derive(Debug, thiserror::Error)]
 pub enum LeafError {
     #[error(transparent)]
-    Edit(#[from] EditError),
+    Boundary(#[from] BoundaryError),
     #[error("no leaf segment is suitable as the generic leaf (none with an image boundary)")]
     NoTemplate,
     #[error("leaf reconstruction cancelled")]
@@ -109,10 +129,10 @@ pub enum LeafError {
 }
 
 /// A view's photo as RGB (None when it cannot be read: the leaf keeps the generic texture).
-fn load_photo(session: &Session, view: usize) -> Option<image::RgbImage> {
+fn load_photo(scene: &Scene, view: usize) -> Option<image::RgbImage> {
     use opencv::prelude::*;
-    let image = &session.scene().reconstruction.images()[view];
-    let mat = session.scene().load_image(image).ok()?;
+    let image = &scene.reconstruction.images()[view];
+    let mat = scene.load_image(image).ok()?;
     let (w, h) = (mat.cols() as u32, mat.rows() as u32);
     let bytes = mat.data_bytes().ok()?;
     Some(image::RgbImage::from_fn(w, h, |x, y| {
@@ -121,36 +141,20 @@ fn load_photo(session: &Session, view: usize) -> Option<image::RgbImage> {
     }))
 }
 
-/// The plant's up direction and axis from the automatic segmentation, and the tips of the
-/// session's branches.
-pub fn plant_context(session: &Session) -> PlantContext {
-    let foreground = &session.segmentation().foreground;
-    PlantContext {
-        up: foreground.up,
-        axis_point: foreground.plant_center,
-        support: session
-            .branches()
-            .branches
-            .iter()
-            .map(|b| b.cylinder.skeleton.point_at_fraction(1.0))
-            .collect(),
-    }
-}
-
-fn segment_points(session: &Session, segment: u32) -> Vec<Point3<f64>> {
-    let points = &session.segmentation().points;
-    session
+fn segment_points(input: &LeafInput, segment: u32) -> Vec<Point3<f64>> {
+    input
+        .labels
         .members(segment)
         .iter()
-        .map(|&p| points.positions[p as usize])
+        .map(|&p| input.points.positions[p as usize])
         .collect()
 }
 
 /// Views of a segment ranked by how well they see it: visible points × |cos| between the
 /// leaf normal and the viewing ray (fronto-parallel views first).
-fn ranked_views(session: &Session, segment: u32, plant: &PlantContext) -> Vec<(f64, usize)> {
-    let members = session.members(segment);
-    let points = &session.segmentation().points;
+fn ranked_views(input: &LeafInput, segment: u32, plant: &PlantContext) -> Vec<(f64, usize)> {
+    let members = input.labels.members(segment);
+    let points = input.points;
     let positions: Vec<Point3<f64>> = members
         .iter()
         .map(|&p| points.positions[p as usize])
@@ -164,7 +168,7 @@ fn ranked_views(session: &Session, segment: u32, plant: &PlantContext) -> Vec<(f
             *counts.entry(v).or_insert(0) += 1;
         }
     }
-    let images = session.scene().reconstruction.images();
+    let images = input.scene.reconstruction.images();
     let mut ranked: Vec<(f64, usize)> = counts
         .into_iter()
         .map(|(v, count)| {
@@ -183,12 +187,12 @@ const BOUNDARY_CANDIDATES: usize = 5;
 /// An image polygon back-projected onto a leaf plane, in plane coordinates (None when too
 /// oblique: fewer than 80% of its vertices land on the plane at a usable angle).
 fn plane_polygon(
-    session: &Session,
+    scene: &Scene,
     view: usize,
     polygon: &[[f64; 2]],
     frame: &fit::LeafFrame,
 ) -> Option<Vec<Point2<f64>>> {
-    let model = &session.scene().reconstruction;
+    let model = &scene.reconstruction;
     let image = &model.images()[view];
     let camera = model.camera_of(image);
     let world_from_camera = image.camera_from_world.inverse();
@@ -289,7 +293,8 @@ fn consensus_region(regions: &[(usize, Vec<Point2<f64>>)]) -> Option<(usize, f64
 /// Builds the generic leaf from a segment's boundary in a view: the boundary is back-projected
 /// onto the leaf's surface, the texture is the photo inside it.
 pub fn extract_template(
-    session: &mut Session,
+    input: &LeafInput,
+    boundaries: &mut Boundaries,
     source: TemplateSource,
     plant: &PlantContext,
     texture_size: u32,
@@ -299,7 +304,7 @@ pub fn extract_template(
         view: Some(source.view),
         message,
     };
-    let points = segment_points(session, source.segment);
+    let points = segment_points(input, source.segment);
     let (frame, _) = leaf_frame(&points, plant).map_err(|e| bad(e.to_string()))?;
     let samples: Vec<(Point2<f64>, f64)> = points.iter().map(|p| frame.to_plane(p)).collect();
     let length_guess = samples
@@ -308,14 +313,22 @@ pub fn extract_template(
         .fold(0.0, f64::max)
         * 2.0;
     let heights = fit::HeightField::fit(&samples, length_guess);
-    let polygon = session
-        .compute_boundary(source.segment, source.view)?
-        .polygon
-        .clone();
-    let image = &session.scene().reconstruction.images()[source.view];
-    let camera = session.scene().reconstruction.camera_of(image).clone();
+    let key = (source.segment, source.view);
+    if !boundaries.contains_key(&key) {
+        let computed = input.views.boundary(
+            input.scene,
+            input.points,
+            &input.labels.segment_of,
+            source.segment,
+            source.view,
+        )?;
+        boundaries.insert(key, computed);
+    }
+    let polygon = boundaries[&key].polygon.clone();
+    let image = &input.scene.reconstruction.images()[source.view];
+    let camera = input.scene.reconstruction.camera_of(image).clone();
     let camera_from_world = image.camera_from_world;
-    let outline = plane_polygon(session, source.view, &polygon, &frame).unwrap_or_default();
+    let outline = plane_polygon(input.scene, source.view, &polygon, &frame).unwrap_or_default();
     if outline.len() < 6 {
         return Err(bad("the view sees the leaf too obliquely".into()));
     }
@@ -331,7 +344,7 @@ pub fn extract_template(
             )
         },
     );
-    let photo = load_photo(session, source.view);
+    let photo = load_photo(input.scene, source.view);
     let size = texture_size.max(8);
     let texture = image::RgbaImage::from_fn(size, size, |i, j| {
         let q = Point2::new(
@@ -385,35 +398,33 @@ pub struct BoundaryChoice {
 
 /// Image boundaries of leaf segments (seed 004 §5.4/§6.2): for each, the boundaries in its
 /// best views (most points seen, most frontal), the chosen one by [`consensus_region`].
-/// Superpixels and boundaries are computed in parallel; the boundaries are cached in the
-/// session.
+/// Superpixels and boundaries are computed in parallel; every boundary computed is added to
+/// `boundaries`.
 pub fn choose_boundaries(
-    session: &mut Session,
+    input: &LeafInput,
+    boundaries: &mut Boundaries,
     segments: &[u32],
     plant: &PlantContext,
     progress: &dyn Progress,
 ) -> Result<BoundaryChoices, LeafError> {
     use rayon::prelude::*;
-    let shared: &Session = session;
     // Views whose photo is missing, unreadable or of the wrong size take no part (checked from
     // the file header; a photo that then fails to decode is dropped below).
-    let images = shared.scene().reconstruction.images();
+    let images = input.scene.reconstruction.images();
     let mut unusable: BTreeMap<usize, String> = images
         .par_iter()
         .enumerate()
-        .filter_map(
-            |(view, image)| match shared.scene().image_file_status(image) {
-                ImageFileStatus::Present => None,
-                status => Some((view, format!("{}: {status:?}", image.name))),
-            },
-        )
+        .filter_map(|(view, image)| match input.scene.image_file_status(image) {
+            ImageFileStatus::Present => None,
+            status => Some((view, format!("{}: {status:?}", image.name))),
+        })
         .collect();
     let ranked: Vec<(u32, Option<fit::LeafFrame>, Vec<usize>)> = segments
         .par_iter()
         .map(|&segment| {
-            let points = segment_points(shared, segment);
+            let points = segment_points(input, segment);
             let frame = leaf_frame(&points, plant).ok().map(|f| f.0);
-            let views = ranked_views(shared, segment, plant)
+            let views = ranked_views(input, segment, plant)
                 .into_iter()
                 .map(|(_, view)| view)
                 .filter(|view| !unusable.contains_key(view))
@@ -432,7 +443,7 @@ pub fn choose_boundaries(
             if progress.is_cancelled() {
                 return None;
             }
-            let result = shared.prepare_views(&[view]);
+            let result = input.views.oversegmentation(input.scene, view);
             progress.advance(1);
             result.err().map(|e| (view, e.to_string()))
         })
@@ -470,12 +481,18 @@ pub fn choose_boundaries(
             }
             for &view in views {
                 // A view where the graph cut finds nothing simply is not a candidate.
-                let Ok(boundary) = shared.boundary_in_view(*segment, view) else {
+                let Ok(boundary) = input.views.boundary(
+                    input.scene,
+                    input.points,
+                    &input.labels.segment_of,
+                    *segment,
+                    view,
+                ) else {
                     continue;
                 };
                 let region = frame
                     .as_ref()
-                    .and_then(|frame| plane_polygon(shared, view, &boundary.polygon, frame));
+                    .and_then(|frame| plane_polygon(input.scene, view, &boundary.polygon, frame));
                 regions.push((view, region.unwrap_or_default(), boundary));
             }
             progress.advance(1);
@@ -520,7 +537,7 @@ pub fn choose_boundaries(
             );
         }
         for (view, _, boundary) in regions {
-            session.store_boundary(segment, view, boundary);
+            boundaries.insert((segment, view), boundary);
         }
     }
     Ok(BoundaryChoices {
@@ -534,24 +551,27 @@ pub fn choose_boundaries(
 /// the largest image region and the most solid boundary most consistent across views;
 /// segments over twice the median leaf segment's size are passed over while others remain.
 pub fn choose_template(
-    session: &Session,
+    input: &LeafInput,
     plant: &PlantContext,
     boundaries: &HashMap<u32, BoundaryChoice>,
 ) -> Result<TemplateSource, LeafError> {
+    let sizes_by_segment = input.labels.sizes();
+    let size_of = |segment: u32| sizes_by_segment.get(segment as usize).copied().unwrap_or(0);
     let mut sizes: Vec<(usize, u32)> = boundaries
         .keys()
-        .map(|&segment| (session.members(segment).len(), segment))
+        .map(|&segment| (size_of(segment), segment))
         .filter(|(n, _)| *n >= 50)
         .collect();
     sizes.sort_by(|a, b| b.cmp(a));
     // A segment far larger than the typical leaf is more likely two merged leaves than one
     // large leaf: keep those out unless nothing else is left.
-    let mut leaf_sizes: Vec<usize> = session
-        .segments()
+    let mut leaf_sizes: Vec<usize> = input
+        .labels
+        .segments
         .iter()
         .enumerate()
         .filter(|(_, s)| s.is_some_and(|s| s.label == SegmentLabel::Leaf))
-        .map(|(id, _)| session.members(id as u32).len())
+        .map(|(id, _)| size_of(id as u32))
         .filter(|&n| n > 0)
         .collect();
     leaf_sizes.sort_unstable();
@@ -565,11 +585,11 @@ pub fn choose_template(
             sizes = typical;
         }
     }
-    let images = session.scene().reconstruction.images();
+    let images = input.scene.reconstruction.images();
     let mut best: Option<(f64, TemplateSource)> = None;
     for &(count, segment) in sizes.iter().take(TEMPLATE_CANDIDATES) {
         let choice = boundaries[&segment];
-        let Ok((frame, _)) = leaf_frame(&segment_points(session, segment), plant) else {
+        let Ok((frame, _)) = leaf_frame(&segment_points(input, segment), plant) else {
             continue;
         };
         let ray = (frame.origin - images[choice.view].center_world()).normalize();
@@ -594,23 +614,20 @@ pub fn choose_template(
 }
 
 /// Checks that a user's generic-leaf pick names a non-empty segment and an existing view.
-fn check_template_pick(session: &Session, pick: TemplatePick) -> Result<(), LeafError> {
+fn check_template_pick(input: &LeafInput, pick: TemplatePick) -> Result<(), LeafError> {
     let bad = |message: String| LeafError::BadTemplate {
         segment: pick.segment,
         view: pick.view,
         message,
     };
-    let exists = session
-        .segments()
-        .get(pick.segment as usize)
-        .is_some_and(|s| s.is_some());
-    if !exists || session.members(pick.segment).is_empty() {
+    let exists = input.labels.state(pick.segment).is_some();
+    if !exists || input.labels.members(pick.segment).is_empty() {
         return Err(bad(format!(
-            "no such segment (the session has {})",
-            session.segments().len()
+            "no such segment (the labels have {})",
+            input.labels.segments.len()
         )));
     }
-    let views = session.scene().reconstruction.images().len();
+    let views = input.scene.reconstruction.images().len();
     if let Some(view) = pick.view
         && view >= views
     {
@@ -626,38 +643,33 @@ const TEMPLATE_CANDIDATES: usize = 6;
 /// to be the generic leaf (likely merged leaves).
 const MAX_TEMPLATE_SIZE_RATIO: usize = 2;
 
-/// Reconstructs every leaf segment of the session (seed 004 §6.2): boundaries, generic leaf,
+/// Reconstructs every leaf segment (seed 004 §6.2): boundaries, generic leaf,
 /// then the fits, in parallel, grouped by the view whose photo textures them (one photo in
 /// memory per worker).
 pub fn reconstruct_leaves(
-    session: &mut Session,
+    input: &LeafInput,
     options: &LeafOptions,
     progress: &dyn Progress,
 ) -> Result<LeafReconstruction, LeafError> {
     use rayon::prelude::*;
-    let plant = plant_context(session);
+    let plant = input.plant;
     let mut timings = LeafTimings::default();
-    let leaf_segments: Vec<u32> = session
-        .segments()
-        .iter()
-        .enumerate()
-        .filter(|(_, s)| s.is_some_and(|s| s.label == SegmentLabel::Leaf))
-        .map(|(id, _)| id as u32)
-        .filter(|&id| !session.members(id).is_empty())
-        .collect();
+    let mut computed = Boundaries::new();
+    let sizes = input.labels.sizes();
+    let leaf_segments: Vec<u32> = input.labels.leaf_segments();
 
     if let Some(pick) = options.template {
-        check_template_pick(session, pick)?;
+        check_template_pick(input, pick)?;
     }
 
     let clock = Instant::now();
     let boundaries = if options.fit.use_boundary {
-        choose_boundaries(session, &leaf_segments, &plant, progress)?
+        choose_boundaries(input, &mut computed, &leaf_segments, plant, progress)?
     } else {
         // Only the generic leaf needs a boundary.
         let mut largest: Vec<(usize, u32)> = leaf_segments
             .iter()
-            .map(|&s| (session.members(s).len(), s))
+            .map(|&s| (sizes[s as usize], s))
             .collect();
         largest.sort_by(|a, b| b.cmp(a));
         let mut some: Vec<u32> = largest
@@ -670,7 +682,7 @@ pub fn reconstruct_leaves(
         {
             some.push(pick.segment);
         }
-        choose_boundaries(session, &some, &plant, progress)?
+        choose_boundaries(input, &mut computed, &some, plant, progress)?
     };
     timings.boundaries = clock.elapsed().as_secs_f64();
     if progress.is_cancelled() {
@@ -700,10 +712,10 @@ pub fn reconstruct_leaves(
                 });
             }
         },
-        None => choose_template(session, &plant, &boundaries.chosen).ok(),
+        None => choose_template(input, plant, &boundaries.chosen).ok(),
     };
     let template = match source {
-        Some(source) => extract_template(session, source, &plant, 256)?,
+        Some(source) => extract_template(input, &mut computed, source, plant, 256)?,
         None => {
             // No image boundary anywhere: an elliptic generic leaf.
             let ellipse: Vec<Point2<f64>> = (0..64)
@@ -746,21 +758,21 @@ pub fn reconstruct_leaves(
         fitted: Result<FittedLeaf, FitError>,
     }
     let groups: Vec<ViewGroup> = by_view.into_iter().collect();
-    let shared: &Session = session;
-    let model = &shared.scene().reconstruction;
+    let model = &input.scene.reconstruction;
+    let known: &Boundaries = &computed;
     let mut results: Vec<Outcome> = groups
         .par_iter()
         .flat_map_iter(|(view, members)| {
             let photo = view
                 .filter(|_| !progress.is_cancelled())
-                .and_then(|v| load_photo(shared, v));
+                .and_then(|v| load_photo(input.scene, v));
             members
                 .iter()
                 .filter(|_| !progress.is_cancelled())
                 .map(|&(order, segment)| {
-                    let points = segment_points(shared, segment);
+                    let points = segment_points(input, segment);
                     let boundary_view = view.and_then(|v| {
-                        let boundary = shared.boundary(segment, v)?;
+                        let boundary = known.get(&(segment, v))?;
                         Some(BoundaryView {
                             polygon: &boundary.polygon,
                             camera: model.camera_of(&model.images()[v]),
@@ -771,7 +783,7 @@ pub fn reconstruct_leaves(
                     let fitted = fit_leaf(
                         &points,
                         &template,
-                        &plant,
+                        plant,
                         boundary_view.as_ref(),
                         &options.fit,
                     );
@@ -818,6 +830,7 @@ pub fn reconstruct_leaves(
         leaves,
         skipped,
         unusable_views: boundaries.unusable_views,
+        boundaries: computed,
         timings,
     })
 }

@@ -15,11 +15,12 @@ use crate::scene::ply::{Column, Element, Ply, ScalarType, encode_ply_binary};
 use crate::util::atomic::write_atomic;
 
 /// The labelled point cloud of the output contract (`segmentation.ply`): the input points with
-/// `x y z red green blue`, `leaf_id` (−1 = not a leaf) and the COLMAP `point_id`.
+/// `x y z red green blue`, `leaf_id` (−1 = not a leaf) and their ids in the input under the
+/// column name given (`point_id` for COLMAP point3D ids).
 pub fn segmentation_ply(
     positions: &[Point3<f64>],
     colors: &[[u8; 3]],
-    point_ids: &[u64],
+    (id_column, point_ids): (&str, &[u64]),
     leaf_ids: &[i64],
 ) -> Ply {
     let n = positions.len();
@@ -55,7 +56,7 @@ pub fn segmentation_ply(
                     leaf_ids.iter().map(|&l| l as f64).collect(),
                 ),
                 Column::scalar(
-                    "point_id",
+                    id_column,
                     ScalarType::U32,
                     point_ids.iter().map(|&i| i as f64).collect(),
                 ),

@@ -774,7 +774,10 @@ fn write_ground_truth(
 
     // Centrelines every ~5 mm, for distance metrics.
     let branches = crate::branch::plant::skeleton_records(&plant.branches, 0.005, 2);
-    write_json(&gt.join("branches.json"), &branches)?;
+    write_json(
+        &gt.join("branches.json"),
+        &crate::branch::plant::SkeletonFile::new(branches),
+    )?;
 
     // Dense surface samples of the plant (leaves and stems), ~2 mm apart.
     let mut xs = Vec::new();

@@ -2,6 +2,16 @@
 
 use nalgebra::{Matrix3, Point3, Vector3};
 
+/// Any unit vector perpendicular to `v`.
+pub fn any_perpendicular(v: &Vector3<f64>) -> Vector3<f64> {
+    let helper = if v.x.abs() < 0.9 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    v.cross(&helper).normalize()
+}
+
 /// The least-squares point closest to all lines `(origin, direction)` (e.g. the point a
 /// ring of cameras looks at). `None` when the lines are (nearly) parallel, so that the
 /// system is ill-conditioned: smallest eigenvalue below 1e-3 of the largest.

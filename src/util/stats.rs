@@ -16,6 +16,12 @@ pub fn quantile_sorted(sorted: &[f64], q: f64) -> f64 {
     sorted[index.min(sorted.len() - 1)]
 }
 
+/// The value at fraction `q` of `values` by nearest rank (sorts them); NaN when empty.
+pub fn quantile(values: &mut [f64], q: f64) -> f64 {
+    values.sort_by(f64::total_cmp);
+    quantile_sorted(values, q)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -31,5 +37,6 @@ mod tests {
         assert_eq!(quantile_sorted(&sorted, 0.9), 4.0);
         assert_eq!(quantile_sorted(&sorted, 2.0), 4.0);
         assert!(quantile_sorted(&[], 0.5).is_nan());
+        assert_eq!(quantile(&mut [4.0, 0.0, 3.0, 1.0, 2.0], 0.9), 4.0);
     }
 }

@@ -13,9 +13,9 @@ use egui::{
     Color32, ColorImage, Pos2, Rect, Sense, Shape, Stroke, TextureHandle, Vec2, pos2, vec2,
 };
 use frond::edit::{BranchEnd, BranchStroke, BranchTarget, Command, PixelRef};
-use frond::graph::pipeline::SegmentLabel;
 use frond::leaf::TemplatePick;
 use frond::scene::Scene;
+use frond::segment::SegmentLabel;
 use nalgebra::Point3;
 
 use crate::tools::Tool;

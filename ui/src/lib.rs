@@ -19,8 +19,8 @@ use std::time::{Duration, Instant};
 use egui::{Color32, Key, KeyboardShortcut, Modifiers, RichText};
 use egui_extras::{Column, TableBuilder};
 use frond::edit::Command;
-use frond::graph::pipeline::SegmentLabel;
 use frond::scene::ImageFileStatus;
+use frond::segment::SegmentLabel;
 
 use files::{ConfigDir, DirEntry, list_dir, recoverable_autosave};
 use image_view::{Action, ImagePanel};
@@ -89,13 +89,11 @@ fn remove_autosave(config: &ConfigDir, workspace: &Workspace) {
 /// Frames of the benchmark's editing phase (at most).
 const EDIT_BENCHMARK_FRAMES: usize = 20;
 
+/// Nearest-rank percentile of frame times (0 when there are none).
 fn percentile(values: &[f32], q: f64) -> f32 {
-    let mut sorted = values.to_vec();
-    sorted.sort_by(f32::total_cmp);
-    sorted
-        .get(((sorted.len().max(1) - 1) as f64 * q).round() as usize)
-        .copied()
-        .unwrap_or(0.0)
+    let mut values: Vec<f64> = values.iter().map(|&v| v as f64).collect();
+    let value = frond::util::stats::quantile(&mut values, q);
+    if value.is_nan() { 0.0 } else { value as f32 }
 }
 
 /// A message in the status bar.
@@ -1590,7 +1588,7 @@ impl FrondApp {
                 }
                 Dialog::Export { path } => {
                     ui.heading("Export");
-                    ui.label("Writes plant.glb, plant.obj (+ materials and texture atlas), segmentation.ply and segments.json into the folder; leaves are fitted first if needed.");
+                    ui.label("Writes plant.glb, plant.obj (+ materials and texture atlas), segmentation.ply, segments.json, skeleton.json and report.json into the folder, as frond reconstruct does; leaves are fitted first if needed.");
                     ui.add(egui::TextEdit::singleline(path).desired_width(f32::INFINITY));
                     ui.horizontal(|ui| {
                         if ui.button("Export").clicked() && !path.trim().is_empty() {

@@ -11,9 +11,9 @@ use eframe::egui_wgpu::{self, CallbackResources, CallbackTrait, RenderState};
 use eframe::wgpu;
 use egui::{Color32, Sense};
 use frond::branch::{CylinderMeshing, any_perpendicular};
-use frond::graph::foreground::PointClass;
 use frond::mesh::TriMesh;
 use frond::render::{GpuScene, Lighting, MeshHandle, Renderer, TextureHandle, ViewCamera};
+use frond::segment::foreground::PointClass;
 use image::RgbaImage;
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 

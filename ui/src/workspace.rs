@@ -5,9 +5,9 @@
 use std::path::{Path, PathBuf};
 
 use frond::edit::{Command, EditError, Session, open_project, save_session};
-use frond::graph::pipeline::{SegmentError, SegmentLabel, SegmentOptions, segment_scene};
-use frond::leaf::{LeafError, LeafOptions, LeafReconstruction, TemplatePick, reconstruct_leaves};
+use frond::leaf::{LeafError, LeafOptions, LeafReconstruction, TemplatePick};
 use frond::scene::{ImageFileStatus, Scene};
+use frond::segment::{SegmentError, SegmentLabel, SegmentOptions, segment_scene};
 use frond::util::progress::Progress;
 
 /// The open work.
@@ -172,14 +172,15 @@ impl Workspace {
             template: self.generic_leaf,
             ..LeafOptions::default()
         };
-        let leaves = reconstruct_leaves(&mut self.session, &options, progress)?;
+        let leaves = self.session.fit_leaves(&options, progress)?;
         self.leaves = Some((self.revision, leaves));
         Ok(())
     }
 
-    /// Exports `plant.glb`, `plant.obj` (with its materials and atlas pages),
-    /// `segmentation.ply` and `segments.json` into `out`, fitting the leaves first when the
-    /// last fit is older than the edits.
+    /// Exports what `frond reconstruct` writes (`plant.glb`, `plant.obj` with its materials
+    /// and atlas pages, `segmentation.ply`, `segments.json`, `skeleton.json`, `report.json`)
+    /// into `out` through the library's pipeline, fitting the leaves first when the last fit
+    /// is older than the edits.
     pub fn export(&mut self, out: &Path, progress: &dyn Progress) -> Result<ExportSummary, String> {
         if self.current_leaves().is_none() {
             self.fit_leaves(progress).map_err(|e| e.to_string())?;
@@ -188,19 +189,18 @@ impl Workspace {
             return Err("the leaves were not reconstructed".into());
         };
         progress.stage("export", 0);
-        let plant = frond::branch::plant::session_plant(&self.session, leaves);
-        let report = plant
-            .model
-            .export(out)
-            .map_err(|e| format!("exporting to {}: {e}", out.display()))?;
-        self.session
-            .write_outputs(out)
-            .map_err(|e| format!("writing the segmentation to {}: {e}", out.display()))?;
+        let options = LeafOptions {
+            template: self.generic_leaf,
+            ..LeafOptions::default()
+        };
+        let report =
+            frond::pipeline::write_plant(&self.session.plant_state(), leaves, &options, out)
+                .map_err(|e| format!("exporting to {}: {e}", out.display()))?;
         Ok(ExportSummary {
             folder: out.to_path_buf(),
-            leaves: report.leaves,
-            branches: report.branches,
-            triangles: report.triangles,
+            leaves: report.counts.leaves_fitted + report.counts.leaves_posed,
+            branches: report.counts.branches + report.counts.petioles,
+            triangles: report.counts.triangles,
         })
     }
 

@@ -13,7 +13,7 @@ use egui::{Event, Key, Modifiers, PointerButton, Pos2};
 use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
 use frond::edit::{Project, Session};
-use frond::graph::pipeline::SegmentLabel;
+use frond::segment::SegmentLabel;
 use frond_ui::FrondApp;
 use frond_ui::files::ConfigDir;
 use frond_ui::tools::Tool;

@@ -1,27 +1,24 @@
 //! The automatic leaf segmentation (seed 004 §5.1): foreground → kNN graph with joint 3D/2D
-//! weights → threshold partition → recursive normalized cut → leaf / stem / pot / other labels,
-//! and the `segmentation.ply` + `segments.json` outputs.
+//! weights → threshold partition → recursive normalized cut → leaf / stem / pot / other labels.
+//! Takes a scene; returns a [`Segmentation`] (the files are written by [`crate::pipeline`]).
 
 use std::collections::BTreeMap;
-use std::path::Path;
 use std::time::Instant;
 
 use nalgebra::Point3;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::components::Adjacency;
 use super::foreground::{
     Foreground, ForegroundError, ForegroundOptions, PointClass, separate_foreground,
 };
-use super::gradient::GradientImage;
-use super::ncut::{NcutOptions, NcutStats, recursive_ncut};
-use super::points::PointSet;
-use super::shape::Shape;
-use super::{GraphOptions, PointGraph, ViewData};
-use crate::model::{segmentation_ply, write_segmentation_ply};
+use crate::graph::components::Adjacency;
+use crate::graph::gradient::GradientImage;
+use crate::graph::ncut::{NcutOptions, NcutStats, recursive_ncut};
+use crate::graph::points::PointSet;
+use crate::graph::shape::Shape;
+use crate::graph::{GraphOptions, PointGraph, ViewData};
 use crate::scene::{Scene, SceneError};
-use crate::util::atomic::write_atomic;
 use crate::util::progress::Progress;
 
 /// All parameters of the automatic segmentation.
@@ -69,8 +66,6 @@ pub enum SegmentError {
         "the image term (alpha = {alpha}) needs the photos, but no view has its image file (images folder: {folder}); run with --alpha 0 to use 3D distances only"
     )]
     NoImages { alpha: f64, folder: String },
-    #[error("{path}: {message}")]
-    Output { path: String, message: String },
     #[error("segmentation cancelled")]
     Cancelled,
 }
@@ -335,7 +330,7 @@ fn classify(
         .sqrt();
     // Which twelfths of the circle around the axis the segment covers: a leaf never wraps
     // around the plant's axis, the pot and the soil do.
-    let reference = crate::branch::any_perpendicular(&up);
+    let reference = crate::util::geometry::any_perpendicular(&up);
     let other = up.cross(&reference);
     let mut covered = [false; 12];
     for p in points {
@@ -552,35 +547,4 @@ pub fn segment_scene(
         graph,
         graph_points: plant,
     })
-}
-
-/// Writes `segmentation.ply` (every input point with its `leaf_id`) and `segments.json`.
-pub fn write_segmentation(out: &Path, segmentation: &Segmentation) -> Result<(), SegmentError> {
-    let output_error = |path: &Path, e: &dyn std::fmt::Display| SegmentError::Output {
-        path: path.display().to_string(),
-        message: e.to_string(),
-    };
-    std::fs::create_dir_all(out).map_err(|e| output_error(out, &e))?;
-    let points = &segmentation.points;
-    let ply = segmentation_ply(
-        &points.positions,
-        &points.colors,
-        &points.point_ids,
-        &segmentation.leaf_ids(),
-    );
-    let ply_path = out.join("segmentation.ply");
-    write_segmentation_ply(&ply_path, &ply).map_err(|e| output_error(&ply_path, &e))?;
-    let json = serde_json::json!({
-        "format": "frond segments 1",
-        "points": points.len(),
-        "leaves": segmentation.num_leaves(),
-        "foreground": segmentation.class_counts(),
-        "floor": segmentation.foreground.floor,
-        "up": segmentation.foreground.up,
-        "plant_center": segmentation.foreground.plant_center,
-        "summary": segmentation,
-    });
-    let json_path = out.join("segments.json");
-    let text = serde_json::to_string_pretty(&json).map_err(|e| output_error(&json_path, &e))?;
-    write_atomic(&json_path, text.as_bytes()).map_err(|e| output_error(&json_path, &e))
 }

@@ -11,9 +11,9 @@ use serde::Serialize;
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 
-use super::components::Adjacency;
-use super::knn_pairs;
-use super::points::PointSet;
+use crate::graph::components::Adjacency;
+use crate::graph::knn_pairs;
+use crate::graph::points::PointSet;
 use crate::scene::Reconstruction;
 use crate::util::geometry::closest_point_to_lines;
 use crate::util::rng::Rng;
@@ -46,7 +46,7 @@ impl Plane {
 
     /// Least-squares plane through points.
     fn fit(points: &[Point3<f64>]) -> Option<Self> {
-        let shape = super::shape::Shape::of(points.iter().copied());
+        let shape = crate::graph::shape::Shape::of(points.iter().copied());
         (shape.count >= 3).then(|| Self {
             normal: shape.normal(),
             offset: shape.normal().dot(&shape.centroid.coords),
@@ -68,7 +68,7 @@ pub struct ForegroundOptions {
     /// Neighbours over which the normal coherence that tells stems from leaves is measured.
     pub stem_neighbours: usize,
     /// A point is on a stem when the median `|n_i · n_p|` of its neighbours' normals is below
-    /// this (see [`super::local_shape::normal_coherence`]).
+    /// this (see [`crate::graph::local_shape::normal_coherence`]).
     pub max_stem_coherence: f64,
     pub seed: u64,
 }
@@ -363,12 +363,15 @@ pub fn separate_foreground(
     // Stems: points whose surroundings turn around a thin tube (incoherent normals).
     let plant: Vec<usize> = (0..n).filter(|&i| class[i] == PointClass::Plant).collect();
     let plant_points = points.subset(&plant);
-    let normals: Vec<Vector3<f64>> = super::local_shape::local_shapes(&plant_points, 8)
+    let normals: Vec<Vector3<f64>> = crate::graph::local_shape::local_shapes(&plant_points, 8)
         .iter()
         .map(|s| s.normal)
         .collect();
-    let coherence =
-        super::local_shape::normal_coherence(&plant_points, &normals, options.stem_neighbours);
+    let coherence = crate::graph::local_shape::normal_coherence(
+        &plant_points,
+        &normals,
+        options.stem_neighbours,
+    );
     for (local, &c) in coherence.iter().enumerate() {
         if c < options.max_stem_coherence {
             class[plant[local]] = PointClass::Stem;

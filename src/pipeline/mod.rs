@@ -1,0 +1,572 @@
+//! The reconstruction pipeline (seed 004 §4–7) as one library call, and the files it writes.
+//!
+//! Scene → foreground and automatic segmentation ([`crate::segment`]) → labels → automatic
+//! skeleton ([`crate::branch`]) → image boundaries and leaf fits ([`crate::leaf`]) → petioles
+//! and posed leaves → plant model ([`crate::model`]) → files. [`reconstruct`] runs all of it
+//! from a scene; [`fit_leaves`] and [`write_plant`] run the leaf and output stages on a
+//! [`PlantState`], the plain data an editing session (or the automatic run) holds, so the
+//! CLI's `reconstruct` and `replay` and the GUI's export write the same files the same way.
+//!
+//! Files, each with one schema and one writer here ([`files`]): `segmentation.ply`,
+//! `segments.json`, `skeleton.json`, `plant.glb`, `plant.obj` (+ `.mtl`, atlas pages) and
+//! `report.json` ([`ReconstructionReport`]).
+
+pub mod files;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use serde::Serialize;
+
+use crate::branch::BranchTree;
+use crate::branch::attach::{Attachment, PosedKind, attach_leaves};
+use crate::branch::plant::{automatic_plant_skeleton, model_branches};
+use crate::branch::skeleton::SkeletonStats;
+use crate::leaf::{
+    Boundaries, LeafError, LeafInput, LeafOptions, LeafReconstruction, LeafTimings, PlantContext,
+    SkippedLeaf, UnusableView, reconstruct_leaves,
+};
+use crate::model::{ModelLeaf, PlantModel};
+use crate::scene::{Scene, SceneError};
+use crate::segment::boundary::BoundaryOptions;
+use crate::segment::{
+    Labels, SegmentError, SegmentOptions, Segmentation, ViewCache, segment_scene,
+};
+use crate::util::progress::Progress;
+
+pub use files::{SegmentsFile, write_segmentation};
+
+/// Pipeline failures.
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error(transparent)]
+    Segment(#[from] SegmentError),
+    #[error(transparent)]
+    Leaf(#[from] LeafError),
+    #[error(transparent)]
+    Sfm(#[from] crate::sfm::SfmError),
+    #[error(transparent)]
+    Mvs(#[from] crate::mvs::MvsError),
+    #[error("{path}: {message}")]
+    Output { path: PathBuf, message: String },
+}
+
+/// Whether `path` is a folder of photos with no COLMAP model in it (what `frond reconstruct`
+/// and the GUI run structure from motion on).
+pub fn is_photo_folder(path: &Path) -> bool {
+    path.is_dir()
+        && crate::scene::SceneSource::locate(path).is_err()
+        && crate::sfm::list_photos(path).is_ok_and(|photos| !photos.is_empty())
+}
+
+/// What [`photos_to_scene`] did.
+pub struct PhotosRun {
+    pub sfm: crate::sfm::SfmReport,
+    pub densify: crate::mvs::DensifyReport,
+    /// Points in the dense workspace.
+    pub dense_points: usize,
+    /// The dense workspace: a COLMAP folder to reconstruct from.
+    pub workspace: PathBuf,
+}
+
+/// Photos to a scene: structure from motion by COLMAP into `out/sfm`, then semi-dense stereo
+/// into `out/dense` (the returned workspace).
+pub fn photos_to_scene(
+    photos: &Path,
+    sfm_options: &crate::sfm::SfmOptions,
+    densify_options: &crate::mvs::DensifyOptions,
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<PhotosRun, PipelineError> {
+    let sfm_out = out.join("sfm");
+    let sfm = crate::sfm::run_sfm(photos, &sfm_out, sfm_options, progress)?;
+    let scene = Scene::open(&sfm_out.join("dense"))?;
+    let workspace = out.join("dense");
+    let (densify, dense_points) = densify_workspace(&scene, densify_options, &workspace, progress)?;
+    Ok(PhotosRun {
+        sfm,
+        densify,
+        dense_points,
+        workspace,
+    })
+}
+
+/// Semi-dense stereo of a scene into a dense workspace at `out` (what `frond densify`
+/// writes); returns the report and the number of points written.
+pub fn densify_workspace(
+    scene: &Scene,
+    options: &crate::mvs::DensifyOptions,
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<(crate::mvs::DensifyReport, usize), PipelineError> {
+    let (fused, report) = crate::mvs::densify(scene, options, progress)?;
+    let dense = crate::mvs::write_workspace(scene, &fused, &report, options, out)?;
+    Ok((report, dense.points().len()))
+}
+
+/// How the automatic skeleton of a plant came out.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct SkeletonRun {
+    pub stats: Option<SkeletonStats>,
+    /// Why there is none, when there is none.
+    pub error: Option<String>,
+    pub seconds: f64,
+}
+
+/// The automatic skeleton of the labels' non-leaf points (an empty tree, with the reason,
+/// when there is none).
+pub fn automatic_skeleton(
+    segmentation: &Segmentation,
+    labels: &Labels,
+) -> (BranchTree, SkeletonRun) {
+    let clock = Instant::now();
+    let (tree, stats, error) =
+        match automatic_plant_skeleton(segmentation, labels, &Default::default()) {
+            Ok((tree, stats)) => (tree, Some(stats), None),
+            Err(e) => {
+                tracing::info!("no automatic skeleton: {e}");
+                (BranchTree::default(), None, Some(e.to_string()))
+            }
+        };
+    (
+        tree,
+        SkeletonRun {
+            stats,
+            error,
+            seconds: clock.elapsed().as_secs_f64(),
+        },
+    )
+}
+
+/// How many edits made the state (0 for the automatic result).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, serde::Deserialize)]
+pub struct EditCount {
+    /// Commands in the history.
+    pub history: usize,
+    /// Commands applied (the undo position).
+    pub applied: usize,
+}
+
+/// The plant as it stands: every output is written from this (see the module docs).
+#[derive(Clone, Copy)]
+pub struct PlantState<'a> {
+    pub scene: &'a Scene,
+    pub segmentation: &'a Segmentation,
+    pub labels: &'a Labels,
+    pub branches: &'a BranchTree,
+    /// How the first (automatic) skeleton came out.
+    pub skeleton: &'a SkeletonRun,
+    /// Projections and superpixels per view.
+    pub views: &'a ViewCache,
+    /// Image boundaries known so far, by (segment, view index).
+    pub boundaries: &'a Boundaries,
+    pub edits: EditCount,
+}
+
+impl PlantState<'_> {
+    /// The plant's up direction and axis (from the segmentation) and its branch tips.
+    pub fn plant_context(&self) -> PlantContext {
+        let foreground = &self.segmentation.foreground;
+        PlantContext {
+            up: foreground.up,
+            axis_point: foreground.plant_center,
+            support: self
+                .branches
+                .branches
+                .iter()
+                .map(|b| b.cylinder.skeleton.point_at_fraction(1.0))
+                .collect(),
+        }
+    }
+}
+
+/// Reconstructs every leaf segment of the state (seed 004 §6).
+pub fn fit_leaves(
+    state: &PlantState,
+    options: &LeafOptions,
+    progress: &dyn Progress,
+) -> Result<LeafReconstruction, LeafError> {
+    let plant = state.plant_context();
+    let input = LeafInput {
+        scene: state.scene,
+        points: &state.segmentation.points,
+        labels: state.labels,
+        plant: &plant,
+        views: state.views,
+    };
+    reconstruct_leaves(&input, options, progress)
+}
+
+/// A plant model with how its leaves were attached.
+pub struct AssembledPlant {
+    pub model: PlantModel,
+    pub attachment: Attachment,
+    /// Seconds spent attaching the leaves.
+    pub attach_seconds: f64,
+}
+
+/// The plant model (seed 004 §7): the fitted leaves, the branches, a petiole from each leaf
+/// to its nearest branch, and posed leaves for small segments and leaf-at-tip branches.
+pub fn assemble_plant(state: &PlantState, leaves: &LeafReconstruction) -> AssembledPlant {
+    let clock = Instant::now();
+    let branches = state.branches;
+    let positions = &state.segmentation.points.positions;
+    let small_segments: Vec<(u32, Vec<nalgebra::Point3<f64>>)> = leaves
+        .skipped
+        .iter()
+        .filter(|s| s.for_branch_stage)
+        .map(|s| {
+            let members = state.labels.members(s.segment);
+            (
+                s.segment,
+                members.iter().map(|&p| positions[p as usize]).collect(),
+            )
+        })
+        .collect();
+    let up = state.segmentation.foreground.up;
+    let attachment = attach_leaves(branches, leaves, &small_segments, &up);
+    let attach_seconds = clock.elapsed().as_secs_f64();
+    // Tip leaves are numbered after every segment id.
+    let tip_leaf_base = state.labels.segments.len() as u32;
+    let mut branches_out = model_branches(branches);
+    let petiole_tree = BranchTree {
+        branches: attachment
+            .petioles
+            .iter()
+            .enumerate()
+            .map(|(k, p)| crate::branch::Branch {
+                id: branches.next_id() + k as u32,
+                parent: Some(p.branch),
+                parent_fraction: p.parent_fraction,
+                cylinder: p.cylinder.clone(),
+                leaf_at_tip: false,
+            })
+            .collect(),
+    };
+    branches_out.extend(model_branches(&petiole_tree));
+    let model = PlantModel {
+        leaves: leaves
+            .leaves
+            .iter()
+            .map(|l| ModelLeaf {
+                id: l.segment,
+                mesh: l.fit.mesh.clone(),
+                texture: l.fit.texture.clone(),
+            })
+            .chain(attachment.posed.iter().map(|p| ModelLeaf {
+                id: match p.kind {
+                    PosedKind::SmallSegment => p.source,
+                    PosedKind::BranchTip => tip_leaf_base + p.source,
+                },
+                mesh: p.mesh.clone(),
+                texture: p.texture.clone(),
+            }))
+            .collect(),
+        branches: branches_out,
+        up: Some(up.into()),
+    };
+    AssembledPlant {
+        model,
+        attachment,
+        attach_seconds,
+    }
+}
+
+/// The stages a reconstruction runs, in order (as `report.json` lists them).
+pub const STAGES: [&str; 7] = [
+    "foreground",
+    "segmentation",
+    "skeleton",
+    "boundaries",
+    "leaves",
+    "attachment",
+    "export",
+];
+
+/// Output counts of a reconstruction.
+#[derive(Clone, Debug, Serialize)]
+pub struct ReportCounts {
+    pub points: usize,
+    /// Points per foreground class.
+    pub foreground: BTreeMap<String, usize>,
+    pub segments: usize,
+    pub leaves_fitted: usize,
+    pub leaves_skipped: usize,
+    pub branches: usize,
+    pub petioles: usize,
+    pub leaves_touching_branches: usize,
+    pub leaves_posed: usize,
+    pub triangles: usize,
+    pub atlas_pages: usize,
+}
+
+/// The generic leaf's source, by COLMAP image id.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct TemplateRecord {
+    pub segment: u32,
+    pub image_id: u32,
+}
+
+/// One fitted leaf in the report.
+#[derive(Clone, Debug, Serialize)]
+pub struct LeafRecord {
+    pub segment: u32,
+    /// The COLMAP image its boundary and texture come from.
+    pub image_id: Option<u32>,
+    pub points: usize,
+    pub point_residual: f64,
+    pub length: f64,
+    pub base: [f64; 3],
+    pub tip: [f64; 3],
+    pub area: f64,
+    pub icp: Option<crate::leaf::fit::IcpReport>,
+    pub boundary_area: Option<f64>,
+    pub outline_area: f64,
+    pub textured_fraction: f64,
+    pub notes: Vec<String>,
+}
+
+/// The parameters a reconstruction ran with.
+#[derive(Clone, Debug, Serialize)]
+pub struct ReportParameters {
+    pub segmentation: SegmentOptions,
+    pub leaves: LeafOptions,
+}
+
+/// Seconds per stage (`total` is their sum, segmentation included).
+#[derive(Clone, Debug, Serialize)]
+pub struct ReportTimings {
+    pub leaves: LeafTimings,
+    pub skeleton: f64,
+    pub attachment: f64,
+    pub export: f64,
+    pub total: f64,
+}
+
+/// The name and version of `report.json`'s schema.
+pub const REPORT_FORMAT: &str = "frond report";
+pub const REPORT_VERSION: u32 = 2;
+
+/// `report.json`: what a reconstruction did (see the README's format section).
+#[derive(Clone, Debug, Serialize)]
+pub struct ReconstructionReport {
+    pub format: String,
+    pub version: u32,
+    /// The Frond version that wrote it.
+    pub frond: String,
+    /// The COLMAP model folder read.
+    pub input: PathBuf,
+    pub stages: Vec<String>,
+    pub edits: EditCount,
+    pub counts: ReportCounts,
+    pub skeleton: Option<SkeletonStats>,
+    /// Why there is no automatic skeleton, when there is none.
+    pub skeleton_error: Option<String>,
+    pub attachment: Attachment,
+    pub template: Option<TemplateRecord>,
+    pub skipped: Vec<SkippedLeaf>,
+    pub unusable_views: Vec<UnusableView>,
+    pub leaves: Vec<LeafRecord>,
+    pub parameters: ReportParameters,
+    /// The automatic segmentation's statistics (segments, σ, edge counts, timings).
+    pub segmentation: serde_json::Value,
+    pub timings: ReportTimings,
+    /// Files written, relative to the output folder.
+    pub files: Vec<PathBuf>,
+}
+
+fn output_error(path: &Path, message: impl std::fmt::Display) -> PipelineError {
+    PipelineError::Output {
+        path: path.to_path_buf(),
+        message: message.to_string(),
+    }
+}
+
+/// Writes every output of a plant whose leaves were reconstructed into `out`:
+/// `skeleton.json`, `plant.glb`, `plant.obj` (+ materials, atlas), `segmentation.ply`,
+/// `segments.json` and `report.json`, each atomically.
+pub fn write_plant(
+    state: &PlantState,
+    leaves: &LeafReconstruction,
+    leaf_options: &LeafOptions,
+    out: &Path,
+) -> Result<ReconstructionReport, PipelineError> {
+    std::fs::create_dir_all(out).map_err(|e| output_error(out, e))?;
+    files::write_skeleton(state.branches, out)?;
+    let AssembledPlant {
+        model,
+        attachment,
+        attach_seconds,
+    } = assemble_plant(state, leaves);
+    let clock = Instant::now();
+    let export = model.export(out).map_err(|e| output_error(out, e))?;
+    let mut boundaries = state.boundaries.clone();
+    for (key, boundary) in &leaves.boundaries {
+        boundaries.entry(*key).or_insert_with(|| boundary.clone());
+    }
+    write_segmentation(state, &boundaries, out)?;
+    let export_seconds = clock.elapsed().as_secs_f64();
+    let images = state.scene.reconstruction.images();
+    let image_id = |view: usize| images.get(view).map(|i| i.id);
+    let segmentation = state.segmentation;
+    let mut written: Vec<PathBuf> = export
+        .files
+        .iter()
+        .map(|f| f.strip_prefix(out).unwrap_or(f).to_path_buf())
+        .collect();
+    written.extend(
+        [
+            files::SKELETON_FILE,
+            files::SEGMENTATION_FILE,
+            files::SEGMENTS_FILE,
+            files::REPORT_FILE,
+        ]
+        .map(PathBuf::from),
+    );
+    let timings = ReportTimings {
+        leaves: leaves.timings.clone(),
+        skeleton: state.skeleton.seconds,
+        attachment: attach_seconds,
+        export: export_seconds,
+        total: segmentation.timings.total
+            + state.skeleton.seconds
+            + leaves.timings.template
+            + leaves.timings.boundaries
+            + leaves.timings.fitting
+            + attach_seconds
+            + export_seconds,
+    };
+    let report = ReconstructionReport {
+        format: REPORT_FORMAT.to_owned(),
+        version: REPORT_VERSION,
+        frond: env!("CARGO_PKG_VERSION").to_owned(),
+        input: state.scene.source.model_dir.clone(),
+        stages: STAGES.iter().map(|s| s.to_string()).collect(),
+        edits: state.edits,
+        counts: ReportCounts {
+            points: segmentation.points.len(),
+            foreground: segmentation.class_counts(),
+            segments: state.labels.segments.iter().flatten().count(),
+            leaves_fitted: leaves.leaves.len(),
+            leaves_skipped: leaves.skipped.len(),
+            branches: state.branches.branches.len(),
+            petioles: attachment.petioles.len(),
+            leaves_touching_branches: attachment.touching,
+            leaves_posed: attachment.posed.len(),
+            triangles: export.triangles,
+            atlas_pages: export.atlas_pages,
+        },
+        skeleton: state.skeleton.stats.clone(),
+        skeleton_error: state.skeleton.error.clone(),
+        attachment,
+        template: leaves.template_source.and_then(|t| {
+            Some(TemplateRecord {
+                segment: t.segment,
+                image_id: image_id(t.view)?,
+            })
+        }),
+        skipped: leaves.skipped.clone(),
+        unusable_views: leaves.unusable_views.clone(),
+        leaves: leaves
+            .leaves
+            .iter()
+            .map(|l| LeafRecord {
+                segment: l.segment,
+                image_id: l.view.and_then(image_id),
+                points: l.fit.points,
+                point_residual: l.fit.point_residual,
+                length: l.fit.length,
+                base: l.fit.base,
+                tip: l.fit.tip,
+                area: l.fit.area,
+                icp: l.fit.icp.clone(),
+                boundary_area: l.fit.boundary_area,
+                outline_area: l.fit.outline_area,
+                textured_fraction: l.fit.textured_fraction,
+                notes: l.fit.notes.clone(),
+            })
+            .collect(),
+        parameters: ReportParameters {
+            segmentation: segmentation.options,
+            leaves: *leaf_options,
+        },
+        segmentation: serde_json::to_value(segmentation)
+            .map_err(|e| output_error(&out.join(files::REPORT_FILE), e))?,
+        timings,
+        files: written,
+    };
+    files::write_json(&out.join(files::REPORT_FILE), &report)?;
+    Ok(report)
+}
+
+/// `segmentation.ply` and `segments.json` of an automatic segmentation (what `frond segment`
+/// writes): its labels, no branches, no boundaries, no edits.
+pub fn write_automatic_segmentation(
+    scene: &Scene,
+    segmentation: &Segmentation,
+    out: &Path,
+) -> Result<(), PipelineError> {
+    let labels = Labels::automatic(segmentation);
+    let views = ViewCache::default();
+    let boundaries = Boundaries::new();
+    let state = PlantState {
+        scene,
+        segmentation,
+        labels: &labels,
+        branches: &BranchTree::default(),
+        skeleton: &SkeletonRun::default(),
+        views: &views,
+        boundaries: &boundaries,
+        edits: EditCount::default(),
+    };
+    write_segmentation(&state, &boundaries, out)
+}
+
+/// Options of a whole reconstruction.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct ReconstructOptions {
+    pub segmentation: SegmentOptions,
+    pub leaves: LeafOptions,
+}
+
+/// What [`reconstruct`] returns: the report it wrote and the leaves it fitted.
+pub struct Reconstruction {
+    pub report: ReconstructionReport,
+    pub leaves: LeafReconstruction,
+}
+
+/// The whole automatic reconstruction of a scene into `out` (see the module docs): the same
+/// files an editing session with no edits exports.
+pub fn reconstruct(
+    scene: &Scene,
+    options: &ReconstructOptions,
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<Reconstruction, PipelineError> {
+    let segmentation = segment_scene(scene, &options.segmentation, progress)?;
+    progress.stage("automatic skeleton", 0);
+    let labels = Labels::automatic(&segmentation);
+    let (branches, skeleton) = automatic_skeleton(&segmentation, &labels);
+    if let Some(error) = &skeleton.error {
+        tracing::warn!("no automatic skeleton: {error}");
+    }
+    let views = ViewCache::new(BoundaryOptions::default());
+    let boundaries = Boundaries::new();
+    let state = PlantState {
+        scene,
+        segmentation: &segmentation,
+        labels: &labels,
+        branches: &branches,
+        skeleton: &skeleton,
+        views: &views,
+        boundaries: &boundaries,
+        edits: EditCount::default(),
+    };
+    let leaves = fit_leaves(&state, &options.leaves, progress)?;
+    progress.stage("export", 0);
+    let report = write_plant(&state, &leaves, &options.leaves, out)?;
+    Ok(Reconstruction { report, leaves })
+}
