@@ -1,0 +1,404 @@
+//! Scene data on the GPU: [`GpuScene`] with its [`TextureHandle`]s and [`MeshHandle`]s, texture
+//! upload with a box-filtered mip chain (and, for cut-out textures, mip levels that keep the
+//! alpha-tested coverage), static and instanced mesh upload and geometry replacement, and the
+//! instance transforms ([`InstanceTransform`], [`IDENTITY_INSTANCE`]) as vertex-buffer bytes.
+
+use image::RgbaImage;
+
+use super::{RenderError, Renderer};
+use crate::mesh::TriMesh;
+
+/// A handle to a texture uploaded to a [`GpuScene`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TextureHandle(usize);
+
+/// A handle to a mesh uploaded to a [`GpuScene`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct MeshHandle(pub(super) usize);
+
+pub(super) struct GpuMesh {
+    /// Vertex and index buffers; `None` for an empty mesh.
+    pub(super) buffers: Option<(wgpu::Buffer, wgpu::Buffer)>,
+    pub(super) index_count: u32,
+    /// What the id pass writes for it.
+    object_id: u32,
+    pub(super) bind_group: wgpu::BindGroup,
+    /// Drawn once, untransformed, by every render (else only through instance batches).
+    pub(super) is_static: bool,
+    /// Static meshes can be hidden (progressive drawing while a view moves).
+    pub(super) visible: bool,
+}
+
+/// Meshes and textures on the GPU, ready to render from any view.
+pub struct GpuScene {
+    textures: Vec<wgpu::TextureView>,
+    pub(super) meshes: Vec<GpuMesh>,
+    triangles: usize,
+}
+
+impl GpuScene {
+    pub fn num_meshes(&self) -> usize {
+        self.meshes.len()
+    }
+    /// Triangles of the static meshes (drawn by every render).
+    pub fn num_triangles(&self) -> usize {
+        self.triangles
+    }
+    /// Shows or hides a static mesh in later renders (all are shown when uploaded).
+    pub fn set_visible(&mut self, mesh: MeshHandle, visible: bool) {
+        if let Some(m) = self.meshes.get_mut(mesh.0) {
+            m.visible = visible;
+        }
+    }
+
+    /// Triangles of one mesh.
+    pub fn mesh_triangles(&self, mesh: MeshHandle) -> usize {
+        self.meshes
+            .get(mesh.0)
+            .map_or(0, |m| m.index_count as usize / 3)
+    }
+}
+
+/// Model-to-world transform of one instance: a column-major 4×4 matrix (rotation, uniform
+/// scale and translation; normals are transformed by its upper 3×3 and renormalised).
+pub type InstanceTransform = [f32; 16];
+
+/// The identity instance transform.
+pub const IDENTITY_INSTANCE: InstanceTransform = [
+    1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
+];
+
+fn vertex_bytes(mesh: &TriMesh) -> Vec<u8> {
+    let mut bytes = Vec::with_capacity(mesh.positions.len() * 32);
+    for i in 0..mesh.positions.len() {
+        let p = mesh.positions[i];
+        let n = mesh.normals[i];
+        let uv = mesh.uvs[i];
+        for v in [p.x, p.y, p.z, n.x, n.y, n.z, uv[0], uv[1]] {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    bytes
+}
+
+/// Box-filtered mip chain of an RGBA image (level 0 first).
+fn mip_chain(image: &RgbaImage) -> Vec<RgbaImage> {
+    let mut levels = vec![image.clone()];
+    loop {
+        let last = levels.last().unwrap_or(image);
+        let (w, h) = last.dimensions();
+        if w == 1 && h == 1 {
+            break;
+        }
+        let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
+        let next = RgbaImage::from_fn(nw, nh, |x, y| {
+            let mut sum = [0u32; 4];
+            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                let px = last.get_pixel((2 * x + dx).min(w - 1), (2 * y + dy).min(h - 1));
+                for c in 0..4 {
+                    sum[c] += px[c] as u32;
+                }
+            }
+            image::Rgba(sum.map(|s| ((s + 2) / 4) as u8))
+        });
+        levels.push(next);
+    }
+    levels
+}
+
+/// Bytes per instance transform.
+pub(super) const INSTANCE_BYTES: u64 = 64;
+
+pub(super) fn instance_bytes(transforms: &[InstanceTransform]) -> Vec<u8> {
+    transforms
+        .iter()
+        .flat_map(|m| m.iter().flat_map(|v| v.to_le_bytes()))
+        .collect()
+}
+
+/// Fraction of texels whose alpha, scaled by `scale`, passes the ½ alpha test.
+fn alpha_coverage(image: &RgbaImage, scale: f32) -> f64 {
+    let passing = image
+        .pixels()
+        .filter(|p| (p[3] as f32 * scale).round().min(255.0) >= 128.0)
+        .count();
+    passing as f64 / (image.width() * image.height()).max(1) as f64
+}
+
+/// Scales a mip level's alpha so that its alpha-tested coverage matches `target` (bisection
+/// on the scale; Castaño's coverage-preserving mipmaps).
+fn preserve_alpha_coverage(level: &mut RgbaImage, target: f64) {
+    let (mut lo, mut hi) = (0.0f32, 16.0f32);
+    for _ in 0..20 {
+        let mid = 0.5 * (lo + hi);
+        if alpha_coverage(level, mid) < target {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    // `hi` reaches the target; texels are rounded as `alpha_coverage` counts them.
+    let scale = hi;
+    for p in level.pixels_mut() {
+        p[3] = (p[3] as f32 * scale).round().min(255.0) as u8;
+    }
+}
+
+impl Renderer {
+    /// An empty scene bound to this renderer's device.
+    pub fn new_scene(&self) -> GpuScene {
+        GpuScene {
+            textures: Vec::new(),
+            meshes: Vec::new(),
+            triangles: 0,
+        }
+    }
+
+    /// Uploads an sRGB texture with its mip chain.
+    pub fn add_texture(&self, scene: &mut GpuScene, image: &RgbaImage) -> TextureHandle {
+        self.upload_texture(scene, mip_chain(image))
+    }
+
+    /// Uploads a cut-out texture (alpha-tested at ½) whose mip levels keep the alpha-tested
+    /// coverage of level 0, so that foliage and billboards do not thin out with distance.
+    pub fn add_cutout_texture(&self, scene: &mut GpuScene, image: &RgbaImage) -> TextureHandle {
+        let mut levels = mip_chain(image);
+        let coverage = alpha_coverage(image, 1.0);
+        for level in levels.iter_mut().skip(1) {
+            preserve_alpha_coverage(level, coverage);
+        }
+        self.upload_texture(scene, levels)
+    }
+
+    fn upload_texture(&self, scene: &mut GpuScene, levels: Vec<RgbaImage>) -> TextureHandle {
+        let (w, h) = levels.first().map_or((1, 1), |l| l.dimensions());
+        let texture = self.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("base colour"),
+            size: wgpu::Extent3d {
+                width: w,
+                height: h,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: levels.len() as u32,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba8UnormSrgb,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        });
+        for (level, mip) in levels.iter().enumerate() {
+            let (mw, mh) = mip.dimensions();
+            self.queue.write_texture(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &texture,
+                    mip_level: level as u32,
+                    origin: wgpu::Origin3d::ZERO,
+                    aspect: wgpu::TextureAspect::All,
+                },
+                mip.as_raw(),
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(4 * mw),
+                    rows_per_image: Some(mh),
+                },
+                wgpu::Extent3d {
+                    width: mw,
+                    height: mh,
+                    depth_or_array_layers: 1,
+                },
+            );
+        }
+        scene
+            .textures
+            .push(texture.create_view(&wgpu::TextureViewDescriptor::default()));
+        TextureHandle(scene.textures.len() - 1)
+    }
+
+    /// Uploads a static mesh drawn with `texture` by every render; `object_id` (non-zero) is
+    /// what the id pass writes. `alpha_test` discards texels with alpha below ½ (cut-out
+    /// leaves, billboards).
+    pub fn add_mesh(
+        &self,
+        scene: &mut GpuScene,
+        mesh: &TriMesh,
+        texture: TextureHandle,
+        object_id: u32,
+        alpha_test: bool,
+    ) -> Result<MeshHandle, RenderError> {
+        self.upload_mesh(scene, mesh, texture, object_id, alpha_test, true)
+    }
+
+    /// Uploads a mesh drawn only through [`InstanceBatch`]es of [`Renderer::render_instanced`].
+    ///
+    /// [`InstanceBatch`]: super::InstanceBatch
+    pub fn add_instanced_mesh(
+        &self,
+        scene: &mut GpuScene,
+        mesh: &TriMesh,
+        texture: TextureHandle,
+        object_id: u32,
+        alpha_test: bool,
+    ) -> Result<MeshHandle, RenderError> {
+        self.upload_mesh(scene, mesh, texture, object_id, alpha_test, false)
+    }
+
+    fn upload_mesh(
+        &self,
+        scene: &mut GpuScene,
+        mesh: &TriMesh,
+        texture: TextureHandle,
+        object_id: u32,
+        alpha_test: bool,
+        is_static: bool,
+    ) -> Result<MeshHandle, RenderError> {
+        use wgpu::util::DeviceExt;
+        if object_id == 0 {
+            return Err(RenderError::Mesh {
+                object_id,
+                message: "object id 0 is reserved for empty pixels".into(),
+            });
+        }
+        mesh.validate()
+            .map_err(|message| RenderError::Mesh { object_id, message })?;
+        let texture_view = scene
+            .textures
+            .get(texture.0)
+            .ok_or_else(|| RenderError::Mesh {
+                object_id,
+                message: format!("unknown texture handle {}", texture.0),
+            })?;
+        let buffers = self.mesh_buffers(mesh);
+        let mut uniform = Vec::with_capacity(16);
+        for v in [object_id, alpha_test as u32, 0, 0] {
+            uniform.extend_from_slice(&v.to_le_bytes());
+        }
+        let object_buffer = self
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("object"),
+                contents: &uniform,
+                usage: wgpu::BufferUsages::UNIFORM,
+            });
+        let bind_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("object"),
+            layout: &self.object_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: object_buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(texture_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::Sampler(&self.sampler),
+                },
+            ],
+        });
+        if is_static {
+            scene.triangles += mesh.triangles.len();
+        }
+        scene.meshes.push(GpuMesh {
+            buffers,
+            index_count: (mesh.triangles.len() * 3) as u32,
+            object_id,
+            bind_group,
+            is_static,
+            visible: true,
+        });
+        Ok(MeshHandle(scene.meshes.len() - 1))
+    }
+
+    /// Vertex and index buffers of a mesh; `None` for an empty mesh.
+    fn mesh_buffers(&self, mesh: &TriMesh) -> Option<(wgpu::Buffer, wgpu::Buffer)> {
+        use wgpu::util::DeviceExt;
+        (!mesh.is_empty()).then(|| {
+            let vertices = self
+                .device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("vertices"),
+                    contents: &vertex_bytes(mesh),
+                    usage: wgpu::BufferUsages::VERTEX,
+                });
+            let index_data: Vec<u8> = mesh
+                .triangles
+                .iter()
+                .flat_map(|t| t.iter().flat_map(|i| i.to_le_bytes()))
+                .collect();
+            let indices = self
+                .device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("indices"),
+                    contents: &index_data,
+                    usage: wgpu::BufferUsages::INDEX,
+                });
+            (vertices, indices)
+        })
+    }
+
+    /// Replaces the geometry of an uploaded mesh, keeping its texture, object id, alpha test
+    /// and visibility: an edited part of a scene is re-uploaded without the rest (an editor
+    /// changing its points or branches keeps its textured leaves on the GPU).
+    pub fn replace_mesh_geometry(
+        &self,
+        scene: &mut GpuScene,
+        handle: MeshHandle,
+        mesh: &TriMesh,
+    ) -> Result<(), RenderError> {
+        let Some(old) = scene.meshes.get(handle.0) else {
+            return Err(RenderError::UnknownMesh(handle.0));
+        };
+        mesh.validate().map_err(|message| RenderError::Mesh {
+            object_id: old.object_id,
+            message,
+        })?;
+        if old.is_static {
+            scene.triangles = scene.triangles - old.index_count as usize / 3 + mesh.triangles.len();
+        }
+        let buffers = self.mesh_buffers(mesh);
+        let slot = &mut scene.meshes[handle.0];
+        slot.buffers = buffers;
+        slot.index_count = (mesh.triangles.len() * 3) as u32;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cutout_mips_keep_the_alpha_tested_coverage() {
+        // Opaque discs on a transparent page: box filtering halves edge alpha, and a level
+        // whose texels sit exactly at ½ must still pass the test.
+        let page = RgbaImage::from_fn(64, 64, |x, y| {
+            let (dx, dy) = (x as f32 - 20.0, y as f32 - 24.0);
+            let alpha = if dx * dx + dy * dy < 100.0 || (x >= 40 && y >= 40) {
+                255
+            } else {
+                0
+            };
+            image::Rgba([40, 160, 40, alpha])
+        });
+        let target = alpha_coverage(&page, 1.0);
+        let mut levels = mip_chain(&page);
+        for level in levels.iter_mut().skip(1) {
+            preserve_alpha_coverage(level, target);
+            let passing = level.pixels().filter(|p| p[3] >= 128).count() as f64
+                / (level.width() * level.height()) as f64;
+            let texel = 1.0 / (level.width() * level.height()) as f64;
+            assert!(
+                passing >= target - 1e-9 || passing + texel >= target,
+                "{passing} vs {target}"
+            );
+        }
+        // A uniformly opaque tile stays opaque at every level.
+        let mut solid = mip_chain(&RgbaImage::from_pixel(8, 8, image::Rgba([1, 2, 3, 255])));
+        for level in solid.iter_mut().skip(1) {
+            preserve_alpha_coverage(level, 1.0);
+            assert!(level.pixels().all(|p| p[3] >= 128));
+        }
+    }
+}
