@@ -87,3 +87,73 @@ fn photos_to_plant_round_trip_meets_the_targets() {
     let chamfer = report.chamfer_relative.median.expect("matched leaves");
     assert!(chamfer <= 0.04, "median Chamfer {chamfer}");
 }
+
+/// Leaf recall of a run against the truth, aligned by the camera centres of its dense model.
+fn leaf_recall(dataset: &Path, run: &Path) -> f64 {
+    let truth = GroundTruth::load(dataset).unwrap();
+    let (similarity, alignment) =
+        align_to_ground_truth(dataset, &run.join("dense/sparse")).unwrap();
+    let mut prediction = Prediction::load(run).unwrap();
+    prediction.transform(&similarity);
+    let report = evaluate(
+        &truth,
+        &prediction,
+        Some(alignment),
+        &EvalOptions::default(),
+    )
+    .unwrap();
+    report.leaves.recall
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap().flatten() {
+        std::fs::copy(entry.path(), to.join(entry.file_name())).unwrap();
+    }
+}
+
+#[test]
+#[ignore = "slow: COLMAP on 36 photos; run scripts/roundtrip.sh"]
+fn a_sparse_colmap_project_with_its_photos_is_densified_to_the_same_recall() {
+    if !common::colmap_available() {
+        return;
+    }
+    let temp = tempfile::tempdir().unwrap();
+    let root: PathBuf = match std::env::var_os("FROND_ROUNDTRIP") {
+        Some(dir) => PathBuf::from(dir),
+        None => {
+            run_chain(temp.path());
+            temp.path().to_path_buf()
+        }
+    };
+    let (dataset, run) = (root.join("dataset"), root.join("run"));
+    // The sparse COLMAP project the photos gave: sparse/0 beside the photos.
+    let project = temp.path().join("sparse_project");
+    copy_dir(&run.join("sfm/sparse/0"), &project.join("sparse/0"));
+    copy_dir(&dataset.join("images"), &project.join("images"));
+    let from_project = temp.path().join("run_sparse");
+    Command::cargo_bin("frond")
+        .unwrap()
+        .arg("reconstruct")
+        .arg(&project)
+        .arg("--out")
+        .arg(&from_project)
+        .assert()
+        .success();
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(from_project.join("report.json")).unwrap())
+            .unwrap();
+    let preparation = &report["preparation"];
+    eprintln!("{preparation}");
+    assert_eq!(preparation["densified"], true, "{preparation}");
+    assert!(
+        preparation["density"]["spacing_footprints"].as_f64().unwrap() > 6.0,
+        "{preparation}"
+    );
+    let (photos, sparse) = (
+        leaf_recall(&dataset, &run),
+        leaf_recall(&dataset, &from_project),
+    );
+    eprintln!("leaf recall: from the photos {photos:.3}, from the sparse project {sparse:.3}");
+    assert!((photos - sparse).abs() <= 0.05, "{photos} vs {sparse}");
+}

@@ -107,9 +107,10 @@ enum Command {
         params: SegmentArgs,
     },
     /// Reconstruct a plant from a COLMAP folder, or from a folder of photos (then `sfm` and
-    /// `densify` run first, into OUT/sfm and OUT/dense): foreground, segmentation, image
-    /// boundaries, leaf fitting, branches, export (plant.glb, plant.obj, segmentation.ply,
-    /// report.json).
+    /// `densify` run first, into OUT/sfm and OUT/dense; a COLMAP folder whose points are too
+    /// sparse for the leaf graph is densified into OUT/dense first): foreground, segmentation,
+    /// image boundaries, leaf fitting, branches, export (plant.glb, plant.obj,
+    /// segmentation.ply, segments.json, skeleton.json, report.json).
     Reconstruct {
         #[command(flatten)]
         scene: SceneArgs,
@@ -129,8 +130,12 @@ enum Command {
         /// id); default: the most frontal, best-segmented large leaf.
         #[arg(long, value_parser = parse_template_pick)]
         template: Option<(u32, Option<u32>)>,
+        /// Segment a COLMAP folder's points as they are, however sparse.
+        #[arg(long)]
+        no_densify: bool,
     },
-    /// Re-apply a project's edits headlessly and write the resulting segmentation.
+    /// Re-apply a project's edits headlessly, fit the leaves and write what `reconstruct`
+    /// writes.
     Replay {
         /// The project file (*.frond).
         project: PathBuf,
@@ -717,12 +722,26 @@ fn parse_template_pick(text: &str) -> Result<(u32, Option<u32>), String> {
 
 fn reconstruct(
     scene_args: &SceneArgs,
+    input: &frond::pipeline::InputOptions,
     params: &SegmentArgs,
     fit: FitMode,
     template: Option<(u32, Option<u32>)>,
     out: &Path,
 ) -> Result<()> {
-    let scene = load_scene(scene_args.source()?)?;
+    let progress = BarProgress::new();
+    let (scene, preparation) = match (&scene_args.path, &scene_args.model) {
+        (Some(path), None) => frond::pipeline::open_input(path, input, out, &progress)
+            .with_context(|| format!("opening {}", path.display()))?,
+        _ => {
+            let source = scene_args.source()?;
+            let given = source.model_dir.clone();
+            let scene = load_scene(source)?;
+            frond::pipeline::open_scene(scene, &given, input, out, &progress)
+                .with_context(|| format!("opening {}", given.display()))?
+        }
+    };
+    progress.bar.finish_and_clear();
+    eprintln!("{}", preparation.note);
     let mut options = ReconstructOptions {
         segmentation: params.options()?,
         ..Default::default()
@@ -745,8 +764,8 @@ fn reconstruct(
         options.leaves.template = Some(frond::leaf::TemplatePick { segment, view });
     }
     let progress = BarProgress::new();
-    let done =
-        frond::pipeline::reconstruct(&scene, &options, out, &progress).with_context(|| {
+    let done = frond::pipeline::reconstruct(&scene, &options, Some(&preparation), out, &progress)
+        .with_context(|| {
             format!(
                 "reconstructing {} into {}",
                 scene.source.model_dir.display(),
@@ -796,7 +815,7 @@ fn replay(project: &Path, out: Option<&Path>) -> Result<()> {
     let leaves = session
         .fit_leaves(&options, &progress)
         .context("reconstructing the leaves")?;
-    let report = frond::pipeline::write_plant(&session.plant_state(), &leaves, &options, &out)
+    let report = frond::pipeline::write_plant(&session.plant_state(), &leaves, &options, None, &out)
         .with_context(|| format!("writing {}", out.display()))?;
     progress.bar.finish_and_clear();
     eprintln!(
@@ -808,12 +827,6 @@ fn replay(project: &Path, out: Option<&Path>) -> Result<()> {
         out.display()
     );
     Ok(())
-}
-
-/// The scene path when it is a folder of photos without any COLMAP model.
-fn photos_folder(scene_args: &SceneArgs) -> Option<PathBuf> {
-    let path = scene_args.path.as_ref()?;
-    (scene_args.model.is_none() && frond::pipeline::is_photo_folder(path)).then(|| path.clone())
 }
 
 /// `frond sfm`: COLMAP on a folder of photos.
@@ -1204,37 +1217,15 @@ fn main() -> Result<()> {
             params,
             fit,
             template,
-        } => match photos_folder(scene) {
-            Some(photos) => {
-                let progress = BarProgress::new();
-                let run = frond::pipeline::photos_to_scene(
-                    &photos,
-                    &sfm_args.options()?,
-                    &dense.options()?,
-                    out,
-                    &progress,
-                )
-                .with_context(|| format!("photos to a scene: {}", photos.display()))?;
-                progress.bar.finish_and_clear();
-                print_sfm(&run.sfm, &out.join("sfm"));
-                println!(
-                    "{} points ({:.1} views each) from {}/{} pairs, {:.1} s; wrote {}",
-                    run.dense_points,
-                    run.densify.mean_views_per_point,
-                    run.densify.pairs_matched,
-                    run.densify.pairs,
-                    run.densify.timings.values().sum::<f64>(),
-                    run.workspace.display()
-                );
-                let dense_scene = SceneArgs {
-                    path: Some(run.workspace),
-                    model: None,
-                    images: None,
-                };
-                reconstruct(&dense_scene, params, *fit, *template, out)
-            }
-            None => reconstruct(scene, params, *fit, *template, out),
-        },
+            no_densify,
+        } => {
+            let input = frond::pipeline::InputOptions {
+                sfm: sfm_args.options()?,
+                densify: dense.options()?,
+                auto_densify: !*no_densify,
+            };
+            reconstruct(scene, &input, params, *fit, *template, out)
+        }
         Command::Replay { project, out } => replay(project, out.as_deref()),
         Command::Scene {
             out,

@@ -11,6 +11,7 @@
 //! `segments.json`, `skeleton.json`, `plant.glb`, `plant.obj` (+ `.mtl`, atlas pages) and
 //! `report.json` ([`ReconstructionReport`]).
 
+pub mod density;
 pub mod files;
 
 use std::collections::BTreeMap;
@@ -35,6 +36,7 @@ use crate::segment::{
 };
 use crate::util::progress::Progress;
 
+pub use density::{PointDensity, point_density};
 pub use files::{SegmentsFile, write_segmentation};
 
 /// Pipeline failures.
@@ -92,6 +94,139 @@ pub fn photos_to_scene(
         dense_points,
         workspace,
     })
+}
+
+/// How the input becomes a scene: photos or a COLMAP folder, and what was run on it.
+#[derive(Clone, Debug)]
+pub struct InputOptions {
+    pub sfm: crate::sfm::SfmOptions,
+    pub densify: crate::mvs::DensifyOptions,
+    /// Densify a COLMAP folder whose points are too sparse for the leaf graph (when its photos
+    /// are there); `false` segments the points as they are.
+    pub auto_densify: bool,
+}
+
+impl Default for InputOptions {
+    fn default() -> Self {
+        Self {
+            sfm: Default::default(),
+            densify: Default::default(),
+            auto_densify: true,
+        }
+    }
+}
+
+/// What [`open_input`] did to make a scene of the input.
+#[derive(Clone, Debug, Serialize)]
+pub struct ScenePreparation {
+    /// The folder given.
+    pub given: PathBuf,
+    /// The folder the scene was read from (the given one, or a workspace written from it).
+    pub scene: PathBuf,
+    /// Structure from motion ran on a folder of photos.
+    pub sfm: bool,
+    /// How densely the given COLMAP scene's points sampled the plant (not measured for
+    /// photos).
+    pub density: Option<PointDensity>,
+    /// The points were densified into `scene` first.
+    pub densified: bool,
+    /// In words, for the user.
+    pub note: String,
+}
+
+/// Opens the input of a reconstruction (see the module docs): a folder of photos goes through
+/// [`photos_to_scene`] into `out/sfm` and `out/dense`; a COLMAP folder is read as it is,
+/// unless its points are too sparse for the leaf graph ([`point_density`]), it has no dense
+/// points and its photos are there: then it is densified into `out/dense` first (with
+/// `auto_densify`).
+pub fn open_input(
+    path: &Path,
+    options: &InputOptions,
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<(Scene, ScenePreparation), PipelineError> {
+    if is_photo_folder(path) {
+        let run = photos_to_scene(path, &options.sfm, &options.densify, out, progress)?;
+        let scene = Scene::open(&run.workspace)?;
+        let mut note = format!(
+            "{} of {} photos registered by COLMAP; {} semi-dense points",
+            run.sfm.registered, run.sfm.photos, run.dense_points
+        );
+        if !run.sfm.unregistered.is_empty() {
+            note.push_str(&format!("; not registered: {}", run.sfm.unregistered.join(", ")));
+        }
+        return Ok((
+            scene,
+            ScenePreparation {
+                given: path.to_path_buf(),
+                scene: run.workspace,
+                sfm: true,
+                density: None,
+                densified: true,
+                note,
+            },
+        ));
+    }
+    let scene = Scene::open(path)?;
+    open_scene(scene, path, options, out, progress)
+}
+
+/// [`open_input`] for a scene already read from `given`.
+pub fn open_scene(
+    scene: Scene,
+    given: &Path,
+    options: &InputOptions,
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<(Scene, ScenePreparation), PipelineError> {
+    progress.stage("measuring point density", 0);
+    let density = point_density(&scene);
+    let photos = scene
+        .reconstruction
+        .images()
+        .iter()
+        .filter(|image| scene.image_file_status(image) == crate::scene::ImageFileStatus::Present)
+        .count();
+    let mut preparation = ScenePreparation {
+        given: given.to_path_buf(),
+        scene: scene.source.model_dir.clone(),
+        sfm: false,
+        density: Some(density.clone()),
+        densified: false,
+        note: String::new(),
+    };
+    let spacing = format!(
+        "{} points {:.1} pixel footprints apart (median)",
+        density.points, density.spacing_footprints
+    );
+    if density.has_dense_points || !density.too_sparse {
+        preparation.note = format!("{spacing}: segmented as they are");
+        return Ok((scene, preparation));
+    }
+    if !options.auto_densify {
+        preparation.note = format!(
+            "{spacing}, too sparse for the leaf graph (over {}), segmented as they are (densifying was turned off)",
+            density.threshold_footprints
+        );
+        return Ok((scene, preparation));
+    }
+    if photos < 2 {
+        preparation.note = format!(
+            "{spacing}, too sparse for the leaf graph, but only {photos} photos are readable: segmented as they are"
+        );
+        return Ok((scene, preparation));
+    }
+    let workspace = out.join("dense");
+    let (_, points) = densify_workspace(&scene, &options.densify, &workspace, progress)?;
+    preparation.note = format!(
+        "{spacing}, too sparse for the leaf graph (over {}): densified into {} ({points} points)",
+        density.threshold_footprints,
+        workspace.display()
+    );
+    tracing::info!("{}", preparation.note);
+    preparation.scene = workspace.clone();
+    preparation.densified = true;
+    Ok((Scene::open(&workspace)?, preparation))
 }
 
 /// Semi-dense stereo of a scene into a dense workspace at `out` (what `frond densify`
@@ -359,6 +494,8 @@ pub struct ReconstructionReport {
     pub frond: String,
     /// The COLMAP model folder read.
     pub input: PathBuf,
+    /// How the input became that scene (structure from motion, densifying), when known.
+    pub preparation: Option<ScenePreparation>,
     pub stages: Vec<String>,
     pub edits: EditCount,
     pub counts: ReportCounts,
@@ -392,6 +529,7 @@ pub fn write_plant(
     state: &PlantState,
     leaves: &LeafReconstruction,
     leaf_options: &LeafOptions,
+    preparation: Option<&ScenePreparation>,
     out: &Path,
 ) -> Result<ReconstructionReport, PipelineError> {
     std::fs::create_dir_all(out).map_err(|e| output_error(out, e))?;
@@ -444,6 +582,7 @@ pub fn write_plant(
         version: REPORT_VERSION,
         frond: env!("CARGO_PKG_VERSION").to_owned(),
         input: state.scene.source.model_dir.clone(),
+        preparation: preparation.cloned(),
         stages: STAGES.iter().map(|s| s.to_string()).collect(),
         edits: state.edits,
         counts: ReportCounts {
@@ -543,6 +682,7 @@ pub struct Reconstruction {
 pub fn reconstruct(
     scene: &Scene,
     options: &ReconstructOptions,
+    preparation: Option<&ScenePreparation>,
     out: &Path,
     progress: &dyn Progress,
 ) -> Result<Reconstruction, PipelineError> {
@@ -567,6 +707,6 @@ pub fn reconstruct(
     };
     let leaves = fit_leaves(&state, &options.leaves, progress)?;
     progress.stage("export", 0);
-    let report = write_plant(&state, &leaves, &options.leaves, out)?;
+    let report = write_plant(&state, &leaves, &options.leaves, preparation, out)?;
     Ok(Reconstruction { report, leaves })
 }
