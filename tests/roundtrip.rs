@@ -141,13 +141,15 @@ fn a_sparse_colmap_project_with_its_photos_is_densified_to_the_same_recall() {
         .assert()
         .success();
     let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(from_project.join("report.json")).unwrap())
-            .unwrap();
+        serde_json::from_slice(&std::fs::read(from_project.join("report.json")).unwrap()).unwrap();
     let preparation = &report["preparation"];
     eprintln!("{preparation}");
     assert_eq!(preparation["densified"], true, "{preparation}");
     assert!(
-        preparation["density"]["spacing_footprints"].as_f64().unwrap() > 6.0,
+        preparation["density"]["spacing_footprints"]
+            .as_f64()
+            .unwrap()
+            > 6.0,
         "{preparation}"
     );
     let (photos, sparse) = (

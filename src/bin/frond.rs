@@ -766,12 +766,12 @@ fn reconstruct(
     let progress = BarProgress::new();
     let done = frond::pipeline::reconstruct(&scene, &options, Some(&preparation), out, &progress)
         .with_context(|| {
-            format!(
-                "reconstructing {} into {}",
-                scene.source.model_dir.display(),
-                out.display()
-            )
-        })?;
+        format!(
+            "reconstructing {} into {}",
+            scene.source.model_dir.display(),
+            out.display()
+        )
+    })?;
     progress.bar.finish_and_clear();
     let report = &done.report;
     let counts = &report.counts;
@@ -815,8 +815,9 @@ fn replay(project: &Path, out: Option<&Path>) -> Result<()> {
     let leaves = session
         .fit_leaves(&options, &progress)
         .context("reconstructing the leaves")?;
-    let report = frond::pipeline::write_plant(&session.plant_state(), &leaves, &options, None, &out)
-        .with_context(|| format!("writing {}", out.display()))?;
+    let report =
+        frond::pipeline::write_plant(&session.plant_state(), &leaves, &options, None, &out)
+            .with_context(|| format!("writing {}", out.display()))?;
     progress.bar.finish_and_clear();
     eprintln!(
         "replayed {} of {} edits; {} leaves fitted, {} branches -> {}",

@@ -50,7 +50,10 @@ pub fn point_density(scene: &Scene) -> PointDensity {
         points: points.len(),
         spacing_footprints,
         threshold_footprints: MAX_SPACING_FOOTPRINTS,
-        has_dense_points: scene.dense.as_ref().is_some_and(|d| !d.visible_in.is_empty()),
+        has_dense_points: scene
+            .dense
+            .as_ref()
+            .is_some_and(|d| !d.visible_in.is_empty()),
         // Fewer than two points measure as NaN: nothing to segment, so too sparse.
         too_sparse: !(spacing_footprints <= MAX_SPACING_FOOTPRINTS),
     }

@@ -153,7 +153,10 @@ pub fn open_input(
             run.sfm.registered, run.sfm.photos, run.dense_points
         );
         if !run.sfm.unregistered.is_empty() {
-            note.push_str(&format!("; not registered: {}", run.sfm.unregistered.join(", ")));
+            note.push_str(&format!(
+                "; not registered: {}",
+                run.sfm.unregistered.join(", ")
+            ));
         }
         return Ok((
             scene,

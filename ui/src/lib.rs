@@ -1502,7 +1502,7 @@ impl FrondApp {
                     entries,
                 } => {
                     ui.heading("Open");
-                    ui.label("A COLMAP project (images/ + sparse/0), a dense/0 workspace, a model folder, or a .frond project.");
+                    ui.label("A folder of photos (COLMAP and stereo run first, into a _frond folder beside it), a COLMAP project (images/ + sparse/0), a dense/0 workspace, a model folder, or a .frond project.");
                     let mut navigate = None;
                     ui.horizontal(|ui| {
                         if ui.button("⬆").on_hover_text("Parent folder").clicked()

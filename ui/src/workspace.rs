@@ -6,7 +6,8 @@ use std::path::{Path, PathBuf};
 
 use frond::edit::{Command, EditError, Session, open_project, save_session};
 use frond::leaf::{LeafError, LeafOptions, LeafReconstruction, TemplatePick};
-use frond::scene::{ImageFileStatus, Scene};
+use frond::pipeline::{InputOptions, ScenePreparation, open_input};
+use frond::scene::ImageFileStatus;
 use frond::segment::{SegmentError, SegmentLabel, SegmentOptions, segment_scene};
 use frond::util::progress::Progress;
 
@@ -29,6 +30,9 @@ pub struct Workspace {
     pub generic_leaf: Option<TemplatePick>,
     /// Each registered image's file status, checked when opened.
     pub image_status: Vec<ImageFileStatus>,
+    /// How the input became the scene (photos through SfM and stereo, a sparse COLMAP folder
+    /// densified); `None` for projects.
+    pub preparation: Option<ScenePreparation>,
 }
 
 /// Why opening failed (the message names the file).
@@ -40,6 +44,18 @@ pub enum OpenError {
     Segment(#[from] SegmentError),
     #[error("{0}")]
     Project(#[from] frond::edit::ProjectError),
+    #[error("{0}")]
+    Pipeline(#[from] frond::pipeline::PipelineError),
+}
+
+/// Where the GUI writes what it computes from an input folder (SfM, dense points): beside it,
+/// named after it with `_frond`.
+pub fn work_folder(input: &Path) -> PathBuf {
+    let name = input
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "input".into());
+    input.with_file_name(format!("{name}_frond"))
 }
 
 impl Workspace {
@@ -63,25 +79,28 @@ impl Workspace {
             autosaved_revision: 0,
             leaves: None,
             generic_leaf: None,
+            preparation: None,
         }
     }
 
-    /// Opens a project file (`*.frond`: its history is replayed) or a COLMAP folder (segmented
-    /// automatically).
+    /// Opens a project file (`*.frond`: its history is replayed), a folder of photos
+    /// (structure from motion and semi-dense stereo into [`work_folder`], then segmented
+    /// automatically) or a COLMAP folder (densified into the work folder first when its
+    /// points are too sparse, then segmented automatically): the library's
+    /// `pipeline::open_input`, as `frond reconstruct` runs it.
     pub fn open(path: &Path, progress: &dyn Progress) -> Result<Self, OpenError> {
         if path.is_file() && path.extension().is_some_and(|e| e == "frond") {
             let session = open_project(path, progress)?;
             return Ok(Self::with_session(session, path, Some(path.to_path_buf())));
         }
-        progress.stage("reading the model", 0);
-        let scene = Scene::open(path)?;
+        progress.stage("reading the input", 0);
+        let (scene, preparation) =
+            open_input(path, &InputOptions::default(), &work_folder(path), progress)?;
         let segmentation = segment_scene(&scene, &SegmentOptions::default(), progress)?;
         progress.stage("automatic skeleton", 0);
-        Ok(Self::with_session(
-            Session::new(scene, segmentation),
-            path,
-            None,
-        ))
+        let mut workspace = Self::with_session(Session::new(scene, segmentation), path, None);
+        workspace.preparation = Some(preparation);
+        Ok(workspace)
     }
 
     /// Replaces the session by an autosave's (the project path and input stay); the result
@@ -193,9 +212,14 @@ impl Workspace {
             template: self.generic_leaf,
             ..LeafOptions::default()
         };
-        let report =
-            frond::pipeline::write_plant(&self.session.plant_state(), leaves, &options, out)
-                .map_err(|e| format!("exporting to {}: {e}", out.display()))?;
+        let report = frond::pipeline::write_plant(
+            &self.session.plant_state(),
+            leaves,
+            &options,
+            self.preparation.as_ref(),
+            out,
+        )
+        .map_err(|e| format!("exporting to {}: {e}", out.display()))?;
         Ok(ExportSummary {
             folder: out.to_path_buf(),
             leaves: report.counts.leaves_fitted + report.counts.leaves_posed,

@@ -6,8 +6,7 @@ mod common;
 
 use std::path::Path;
 
-use frond::pipeline::{ReconstructOptions, reconstruct};
-use frond::scene::Scene;
+use frond::pipeline::{InputOptions, ReconstructOptions, open_input, reconstruct};
 use frond::util::progress::NoProgress;
 use frond_ui::workspace::Workspace;
 use serde_json::Value;
@@ -42,8 +41,16 @@ fn gui_export_and_batch_reconstruction_write_the_same_files() {
     let input = common::write_synthetic_plant(dir.path());
 
     let batch = dir.path().join("batch");
-    let scene = Scene::open(&input).unwrap();
-    let done = reconstruct(&scene, &ReconstructOptions::default(), &batch, &NoProgress).unwrap();
+    let (scene, preparation) =
+        open_input(&input, &InputOptions::default(), &batch, &NoProgress).unwrap();
+    let done = reconstruct(
+        &scene,
+        &ReconstructOptions::default(),
+        Some(&preparation),
+        &batch,
+        &NoProgress,
+    )
+    .unwrap();
     assert!(done.report.counts.leaves_fitted > 0);
 
     let mut workspace = Workspace::open(&input, &NoProgress).unwrap();
