@@ -101,7 +101,10 @@ fn a_small_scene_renders_with_fewer_triangles_under_the_error_bound() {
         assert!(fraction <= 0.02, "frame {frame}: {fraction}");
         any_difference |= lod_frame != full_frame;
     }
-    assert!(any_difference, "the LOD frames equal the full-detail frames");
+    assert!(
+        any_difference,
+        "the LOD frames equal the full-detail frames"
+    );
 }
 
 #[test]

@@ -55,7 +55,7 @@ pub fn point_density(scene: &Scene) -> PointDensity {
             .as_ref()
             .is_some_and(|d| !d.visible_in.is_empty()),
         // Fewer than two points measure as NaN: nothing to segment, so too sparse.
-        too_sparse: !(spacing_footprints <= MAX_SPACING_FOOTPRINTS),
+        too_sparse: spacing_footprints.is_nan() || spacing_footprints > MAX_SPACING_FOOTPRINTS,
     }
 }
 

@@ -624,7 +624,7 @@ pub fn write_plant(
                 base: l.fit.base,
                 tip: l.fit.tip,
                 area: l.fit.area,
-                icp: l.fit.icp.clone(),
+                icp: l.fit.icp,
                 boundary_area: l.fit.boundary_area,
                 outline_area: l.fit.outline_area,
                 textured_fraction: l.fit.textured_fraction,
