@@ -6,6 +6,7 @@
 //! not twist or flip along curved skeletons.
 
 pub mod attach;
+pub mod handles;
 pub mod plant;
 pub mod skeleton;
 pub mod spline;
