@@ -30,6 +30,7 @@ pub struct PhotoView<'a> {
 }
 
 impl<'a> PhotoView<'a> {
+    /// The photo `image` of `model` (which must hold it: its camera is looked up there).
     pub fn new(model: &'a Reconstruction, image: &'a Image) -> Self {
         Self { model, image }
     }
