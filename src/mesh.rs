@@ -1,6 +1,12 @@
 //! Triangle meshes shared by every geometric stage: synthetic plants, fitted leaves, branches,
 //! LOD levels and export. Single precision, as the GPU and glTF use.
+//!
+//! Submodule `primitives` appends small marker meshes (octahedra, tetrahedra, bars, camera
+//! frusta) to a [`TriMesh`].
 
+pub mod primitives;
+
+use std::collections::BTreeMap;
 use std::path::Path;
 
 use nalgebra::{Isometry3, Point3, Vector3};
@@ -114,6 +120,27 @@ impl TriMesh {
                 .iter()
                 .map(|t| [t[0] + offset, t[1] + offset, t[2] + offset]),
         );
+    }
+
+    /// How many triangles use each undirected edge, keyed `(low index, high index)`.
+    pub fn edge_uses(&self) -> BTreeMap<(u32, u32), usize> {
+        let mut uses = BTreeMap::new();
+        for t in &self.triangles {
+            for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+                *uses.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+            }
+        }
+        uses
+    }
+
+    /// The boundary edges: those used by exactly one triangle, as `[low index, high index]` in
+    /// ascending order. Empty for a closed mesh; the outline of an open sheet such as a leaf.
+    pub fn boundary_edges(&self) -> Vec<[u32; 2]> {
+        self.edge_uses()
+            .into_iter()
+            .filter(|&(_, uses)| uses == 1)
+            .map(|((a, b), _)| [a, b])
+            .collect()
     }
 
     /// Checks index ranges, attribute lengths and finiteness; the message names the element.
@@ -397,6 +424,40 @@ mod tests {
         assert_eq!(lo, Point3::new(0.0, 0.0, 0.0));
         assert_eq!(hi, Point3::new(1.0, 1.0, 0.0));
         assert!(mesh.validate().is_ok());
+    }
+
+    #[test]
+    fn the_boundary_of_a_sheet_is_its_outline_and_a_closed_mesh_has_none() {
+        for n in [1, 3, 8] {
+            let sheet = crate::lod::test_meshes::grid(n, |x, y| x * y);
+            let boundary = sheet.boundary_edges();
+            // The unit square's perimeter, split into n edges a side; every edge on it.
+            assert_eq!(boundary.len(), 4 * n);
+            let on_rim = |p: &Point3<f32>| [p.x, p.y].iter().any(|c| *c == 0.0 || *c == 1.0);
+            let mut length = 0.0;
+            for &[a, b] in &boundary {
+                assert!(a < b);
+                let (pa, pb) = (sheet.positions[a as usize], sheet.positions[b as usize]);
+                assert!(on_rim(&pa) && on_rim(&pb), "{pa:?} {pb:?}");
+                length += ((pb.x - pa.x).powi(2) + (pb.y - pa.y).powi(2)).sqrt();
+            }
+            assert!((length - 4.0).abs() < 1e-5, "{length}");
+            // Every rim vertex closes the loop: two boundary edges meet there.
+            let mut degree = std::collections::HashMap::new();
+            for [a, b] in boundary {
+                *degree.entry(a).or_insert(0) += 1;
+                *degree.entry(b).or_insert(0) += 1;
+            }
+            assert!(degree.values().all(|&d| d == 2));
+            // Glued to its own mirror image (shared vertices, flipped triangles) it is closed.
+            let mut closed = sheet.clone();
+            closed
+                .triangles
+                .extend(sheet.triangles.iter().map(|&[a, b, c]| [a, c, b]));
+            assert!(closed.boundary_edges().is_empty());
+            assert!(closed.edge_uses().values().all(|&uses| uses % 2 == 0));
+        }
+        assert!(TriMesh::default().boundary_edges().is_empty());
     }
 
     #[test]

@@ -4,8 +4,12 @@
 //!
 //! Meshing uses rotation-minimising frames (double reflection, Wang et al. 2008), so tubes do
 //! not twist or flip along curved skeletons.
+//!
+//! `handles` projects a tree into a view (a photo or the GUI's 3D camera) as the handles the
+//! user drags, and finds the handle under a press.
 
 pub mod attach;
+pub mod handles;
 pub mod plant;
 pub mod skeleton;
 pub mod spline;

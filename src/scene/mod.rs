@@ -16,6 +16,7 @@ pub mod model;
 pub mod ply;
 pub mod stats;
 pub mod synthetic;
+pub mod view;
 
 use std::path::{Path, PathBuf};
 
@@ -26,6 +27,7 @@ pub use dense::DensePoints;
 pub use error::{SceneError, SceneResult};
 pub use io::{ModelFormat, read_model, write_model};
 pub use model::{Image, ImageId, Keypoint, Point3D, Point3dId, Reconstruction, TrackElement};
+pub use view::{PhotoView, ViewProjection};
 
 /// How a scene's folders were found.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]

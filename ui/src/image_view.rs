@@ -2,7 +2,16 @@
 //! (projected points coloured by segment, graph edges, gradient image, segment boundaries,
 //! fitted leaf outlines, branches with radius circles) and the editing tools, which turn
 //! clicks and strokes into the library's `Command`s. Photos, thumbnails and gradient images
-//! are decoded on worker threads.
+//! are decoded on worker threads. The photo and the overlays under the handles are composed
+//! on the CPU into one panel-sized texture (resampling and line rasterising here are drawing,
+//! not geometry).
+//!
+//! Library calls: `ViewCache::projected` (through `Session::views`) for the points a photo
+//! sees, `Reconstruction::project` for leaf outlines, `TriMesh::boundary_edges` for the
+//! outlines themselves, `branch::handles::project_branches` with a `scene::PhotoView` for the
+//! branch curves and handles, `GradientImage::for_image` for the gradient layer,
+//! `Session::{pick_segment, pick_branch, boundary}` for clicks and boundaries; handle drags go
+//! through `tools::{grab_handle, release_handle}`.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -12,13 +21,15 @@ use std::sync::mpsc::{Receiver, TryRecvError, channel};
 use egui::{
     Color32, ColorImage, Pos2, Rect, Sense, Shape, Stroke, TextureHandle, Vec2, pos2, vec2,
 };
-use frond::edit::{BranchEnd, BranchStroke, BranchTarget, Command, PixelRef};
+use frond::branch::handles::{BranchHandles, HandlePick, project_branches};
+use frond::edit::{BranchStroke, BranchTarget, Command, PixelRef};
 use frond::leaf::TemplatePick;
-use frond::scene::Scene;
+use frond::scene::{Image, ImageId, PhotoView, Reconstruction, Scene};
 use frond::segment::SegmentLabel;
-use nalgebra::Point3;
+use frond::segment::views::Projected;
+use nalgebra::{Point2, Point3};
 
-use crate::tools::Tool;
+use crate::tools::{Tool, grab_handle, release_handle};
 use crate::workspace::Workspace;
 
 /// Largest side of a photo texture (texels); larger photos are shown downscaled.
@@ -27,6 +38,8 @@ const PHOTO_TEXTURE_SIZE: u32 = 2048;
 const THUMBNAIL_SIZE: u32 = 160;
 /// Control points and branch ends are grabbed within this distance (screen points).
 const GRAB_DISTANCE: f32 = 12.0;
+/// Skeleton samples per branch curve drawn in a photo.
+const BRANCH_CURVE_SAMPLES: usize = 48;
 /// The colour branches are drawn in.
 const WOOD: Color32 = Color32::from_rgb(235, 150, 60);
 
@@ -97,6 +110,10 @@ impl ViewTransform {
         self.rect.center() + (vec2(uv[0] as f32, uv[1] as f32) - self.center) * self.zoom
     }
 
+    pub fn screen_from_uv(&self, uv_image: &Point2<f64>) -> Pos2 {
+        self.screen_from_image([uv_image.x, uv_image.y])
+    }
+
     pub fn image_from_screen(&self, p: Pos2) -> [f64; 2] {
         let uv = self.center + (p - self.rect.center()) / self.zoom;
         [uv.x as f64, uv.y as f64]
@@ -153,25 +170,6 @@ fn gradient_image(scene: &Scene, view: usize) -> Result<ColorImage, String> {
     ))
 }
 
-/// The points seen in a view and their pixels (COLMAP convention).
-type ViewProjections = Arc<Vec<(u32, [f32; 2])>>;
-
-/// A drag of a branch handle in progress.
-#[derive(Clone, Copy, Debug)]
-enum BranchDrag {
-    Move {
-        branch: u32,
-        control_point: usize,
-    },
-    Radius {
-        branch: u32,
-        end: BranchEnd,
-        center: [f64; 2],
-        /// Image pixels per metre at the end, across the view ray.
-        px_per_metre: f64,
-    },
-}
-
 /// The image panel's state.
 pub struct ImagePanel {
     pub view: usize,
@@ -186,15 +184,13 @@ pub struct ImagePanel {
     gradients: HashMap<usize, Loadable>,
     thumbnails: Vec<Option<TextureHandle>>,
     thumbnail_receiver: Option<Receiver<(usize, ColorImage)>>,
-    /// Per view: the points seen in it and their pixels.
-    projections: HashMap<usize, ViewProjections>,
     /// The scene shared with gradient workers (made on first use).
     shared_scene: Option<Arc<Scene>>,
     /// Leaf outlines as world segments, with the workspace revision of the fit.
     outlines: Option<(u64, Vec<[Point3<f64>; 2]>)>,
     stroke: Vec<[f64; 2]>,
     merge_first: Option<PixelRef>,
-    drag: Option<BranchDrag>,
+    drag: Option<HandlePick>,
     /// The transform of the last frame drawn.
     pub transform: Option<ViewTransform>,
     /// The photo as seen at the current zoom and pan with the gradient image, the points,
@@ -236,7 +232,6 @@ impl Default for ImagePanel {
             gradients: HashMap::new(),
             thumbnails: Vec::new(),
             thumbnail_receiver: None,
-            projections: HashMap::new(),
             shared_scene: None,
             outlines: None,
             stroke: Vec::new(),
@@ -339,7 +334,7 @@ fn resample_photo(
 /// ones, translucent colours are blended over what is there.
 fn splat_points(
     image: &mut ColorImage,
-    projections: &[(u32, [f32; 2])],
+    projections: &[Projected],
     transform: &ViewTransform,
     pixels_per_point: f32,
     color_of: impl Fn(u32) -> Color32,
@@ -347,9 +342,10 @@ fn splat_points(
     let [width, height] = image.size;
     let half = ((1.2 * transform.zoom.sqrt()).clamp(1.0, 3.5) * pixels_per_point).round() as i64;
     let (w, h) = (width as i64, height as i64);
-    for &(point, uv) in projections {
-        let p = (transform.screen_from_image([uv[0] as f64, uv[1] as f64]) - transform.rect.min)
-            * pixels_per_point;
+    for projected in projections {
+        let point = projected.point;
+        let p =
+            (transform.screen_from_uv(&projected.uv_image) - transform.rect.min) * pixels_per_point;
         let (x, y) = (p.x.floor() as i64, p.y.floor() as i64);
         if x < -half || y < -half || x >= w + half || y >= h + half {
             continue;
@@ -600,24 +596,6 @@ impl ImagePanel {
         self.thumbnail_receiver = Some(receiver);
     }
 
-    fn projections(&mut self, workspace: &Workspace, view: usize) -> ViewProjections {
-        Arc::clone(self.projections.entry(view).or_insert_with(|| {
-            let session = &workspace.session;
-            let model = &session.scene().reconstruction;
-            let image = &model.images()[view];
-            let points = &session.segmentation().points;
-            Arc::new(
-                (0..points.len())
-                    .filter(|&p| points.views[p].binary_search(&(view as u32)).is_ok())
-                    .filter_map(|p| {
-                        let uv = model.project(image, &points.positions[p])?;
-                        Some((p as u32, [uv.x as f32, uv.y as f32]))
-                    })
-                    .collect(),
-            )
-        }))
-    }
-
     /// Leaf outlines (boundary edges of the fitted leaf meshes) of the latest fit.
     fn outlines(&mut self, workspace: &Workspace) -> &[[Point3<f64>; 2]] {
         let Some((revision, leaves)) = &workspace.leaves else {
@@ -627,23 +605,12 @@ impl ImagePanel {
             let mut segments = Vec::new();
             for leaf in &leaves.leaves {
                 let mesh = &leaf.fit.mesh;
-                let mut count: HashMap<(u32, u32), u32> = HashMap::new();
-                for t in &mesh.triangles {
-                    for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
-                        *count.entry((a.min(b), a.max(b))).or_default() += 1;
-                    }
-                }
-                segments.extend(
-                    count
-                        .into_iter()
-                        .filter(|(_, n)| *n == 1)
-                        .map(|((a, b), _)| {
-                            [
-                                mesh.positions[a as usize].cast::<f64>(),
-                                mesh.positions[b as usize].cast::<f64>(),
-                            ]
-                        }),
-                );
+                segments.extend(mesh.boundary_edges().into_iter().map(|[a, b]| {
+                    [
+                        mesh.positions[a as usize].cast::<f64>(),
+                        mesh.positions[b as usize].cast::<f64>(),
+                    ]
+                }));
             }
             self.outlines = Some((*revision, segments));
         }
@@ -702,15 +669,14 @@ impl ImagePanel {
 
     /// Draws the panel and turns the active tool's gestures into actions.
     pub fn ui(&mut self, ui: &mut egui::Ui, workspace: &Workspace, tool: Tool) -> Vec<Action> {
-        let mut actions = Vec::new();
-        let images = workspace.session.scene().reconstruction.images();
+        let model = &workspace.session.scene().reconstruction;
+        let images = model.images();
         if images.is_empty() {
             ui.label("The model has no registered images.");
-            return actions;
+            return Vec::new();
         }
         self.view = self.view.min(images.len() - 1);
         let view = self.view;
-        let model = &workspace.session.scene().reconstruction;
         let image = &images[view];
         let camera = model.camera_of(image);
         let size = vec2(camera.width as f32, camera.height as f32);
@@ -723,14 +689,60 @@ impl ImagePanel {
         self.poll_loads(ui.ctx());
 
         let (response, painter) = ui.allocate_painter(ui.available_size(), Sense::click_and_drag());
+        let transform = self.navigate(ui, &response, size, tool);
+        let image_rect = Rect::from_min_max(
+            transform.screen_from_image([0.0, 0.0]),
+            transform.screen_from_image([size.x as f64, size.y as f64]),
+        );
+        let photo = self.ready(view, Layer::Photo);
+        let gradient = self.ready(view, Layer::Gradient);
+        self.placeholder_ui(&painter, image_rect, photo.is_some() || gradient.is_some());
+
+        let pixels_per_point = ui.ctx().pixels_per_point();
+        let key = self.composite_key(workspace, &transform, pixels_per_point, &photo, &gradient);
+        let composed = self.composes(workspace, &photo, &gradient);
+        let recompose = composed && self.composite.as_ref().is_none_or(|(k, _)| *k != key);
+        let handles = self.branch_handles(workspace, tool, recompose);
+        if !composed {
+            self.composite = None;
+        } else if recompose {
+            let layers = PhotoLayers {
+                photo,
+                gradient,
+                size,
+            };
+            self.compose_ui(ui.ctx(), workspace, &transform, key, &layers, &handles);
+        }
+        self.composite_ui(&painter, image_rect, response.rect);
+        if self.overlays.edges {
+            graph_edges_ui(&painter, &transform, workspace, view);
+        }
+        if self.overlays.branches {
+            branch_handles_ui(&painter, &transform, &handles, tool);
+        }
+
+        let response = response.on_hover_cursor(tool.cursor());
+        let actions = self.tool_input(ui, &response, &transform, workspace, &handles, tool);
+        self.gestures_ui(ui, &painter, &response, &transform, image.id);
+        self.status_ui(&painter, response.rect, &image.name, images.len());
+        actions
+    }
+
+    /// Fits the photo to the panel on the first frame; zooms about the cursor; pans with the
+    /// middle or right button, or any button when navigating. Returns this frame's transform.
+    fn navigate(
+        &mut self,
+        ui: &egui::Ui,
+        response: &egui::Response,
+        size: Vec2,
+        tool: Tool,
+    ) -> ViewTransform {
         let rect = response.rect;
         if !self.fitted && rect.width() > 1.0 && rect.height() > 1.0 {
             self.zoom = (rect.width() / size.x).min(rect.height() / size.y) * 0.96;
             self.center = size * 0.5;
             self.fitted = true;
         }
-        // Zoom about the cursor; pan with the middle or right button, or any button when
-        // navigating.
         if let Some(hover) = response.hover_pos() {
             let (scroll, pinch) = ui.input(|i| (i.smooth_scroll_delta.y, i.zoom_delta()));
             let factor = (scroll * 0.002).exp() * pinch;
@@ -752,58 +764,82 @@ impl ImagePanel {
             zoom: self.zoom,
         };
         self.transform = Some(transform);
+        transform
+    }
 
-        let image_rect = Rect::from_min_max(
-            transform.screen_from_image([0.0, 0.0]),
-            transform.screen_from_image([size.x as f64, size.y as f64]),
-        );
-        let ready = |loads: &HashMap<usize, Loadable>| match loads.get(&view) {
-            Some(Loadable::Ready(pixels)) => Some(Arc::clone(pixels)),
-            _ => None,
+    /// Branches projected into this view: for composing their curves (`recompose`), for the
+    /// handles a branch tool shows and grabs, and for leaf-at-tip marks; none otherwise (not
+    /// every frame).
+    fn branch_handles(
+        &self,
+        workspace: &Workspace,
+        tool: Tool,
+        recompose: bool,
+    ) -> Vec<BranchHandles> {
+        let tree = workspace.session.branches();
+        let needed = (self.overlays.branches
+            && (recompose || tool.is_branch_tool() || tree.branches.iter().any(|b| b.leaf_at_tip)))
+            || matches!(tool, Tool::MoveBranch | Tool::Radius);
+        if !needed {
+            return Vec::new();
+        }
+        let model = &workspace.session.scene().reconstruction;
+        let view = PhotoView::new(model, &model.images()[self.view]);
+        project_branches(tree, &view, BRANCH_CURVE_SAMPLES)
+    }
+
+    /// A decoded layer of view `view`, when it has arrived and its overlay is on.
+    fn ready(&self, view: usize, layer: Layer) -> Option<Arc<ColorImage>> {
+        let (loads, shown) = match layer {
+            Layer::Photo => (&self.photos, self.overlays.photo),
+            Layer::Gradient => (&self.gradients, self.overlays.gradient),
         };
-        let overlays = self.overlays;
-        let photo = ready(&self.photos).filter(|_| overlays.photo);
-        let gradient = ready(&self.gradients).filter(|_| overlays.gradient);
-        if photo.is_none() && gradient.is_none() {
+        match loads.get(&view) {
+            Some(Loadable::Ready(pixels)) if shown => Some(Arc::clone(pixels)),
+            _ => None,
+        }
+    }
+
+    /// A grey backdrop where no photo or gradient image is shown yet, and the photo's loading
+    /// state (or why it is unavailable) over it.
+    fn placeholder_ui(&self, painter: &egui::Painter, image_rect: Rect, layer_shown: bool) {
+        if !layer_shown {
             painter.rect_filled(image_rect, 0.0, Color32::from_gray(40));
         }
-        if overlays.photo {
-            let message = match self.photos.get(&view) {
-                Some(Loadable::Ready(..)) => None,
-                Some(Loadable::Failed(message)) => Some((
-                    format!("photo unavailable: {message}"),
-                    Color32::from_rgb(230, 160, 80),
-                )),
-                _ => Some(("loading photo …".to_owned(), Color32::from_gray(160))),
-            };
-            if let Some((text, color)) = message {
-                painter.text(
-                    image_rect.center(),
-                    egui::Align2::CENTER_CENTER,
-                    text,
-                    egui::FontId::proportional(14.0),
-                    color,
-                );
-            }
+        if !self.overlays.photo {
+            return;
         }
+        let message = match self.photos.get(&self.view) {
+            Some(Loadable::Ready(..)) => None,
+            Some(Loadable::Failed(message)) => Some((
+                format!("photo unavailable: {message}"),
+                Color32::from_rgb(230, 160, 80),
+            )),
+            _ => Some(("loading photo …".to_owned(), Color32::from_gray(160))),
+        };
+        if let Some((text, color)) = message {
+            painter.text(
+                image_rect.center(),
+                egui::Align2::CENTER_CENTER,
+                text,
+                egui::FontId::proportional(14.0),
+                color,
+            );
+        }
+    }
 
-        let session = &workspace.session;
-        let segment_of = session.segment_of();
-        let segments = session.segments();
-        let label_of = |segment: i32| -> Option<SegmentLabel> {
-            (segment >= 0)
-                .then(|| segments.get(segment as usize).copied().flatten())
-                .flatten()
-                .map(|s| s.label)
-        };
-        let projections = if overlays.points || overlays.edges {
-            Some(self.projections(workspace, view))
-        } else {
-            None
-        };
-        let pixels_per_point = ui.ctx().pixels_per_point();
-        let key = CompositeKey {
-            view,
+    /// What the composite of this frame depends on.
+    fn composite_key(
+        &self,
+        workspace: &Workspace,
+        transform: &ViewTransform,
+        pixels_per_point: f32,
+        photo: &Option<Arc<ColorImage>>,
+        gradient: &Option<Arc<ColorImage>>,
+    ) -> CompositeKey {
+        let rect = transform.rect;
+        CompositeKey {
+            view: self.view,
             revision: workspace.revision,
             leaves: workspace.leaves.as_ref().map(|(revision, _)| *revision),
             size: [
@@ -812,124 +848,82 @@ impl ImagePanel {
             ],
             center: [self.center.x.to_bits(), self.center.y.to_bits()],
             zoom: self.zoom.to_bits(),
-            overlays,
+            overlays: self.overlays,
             photo: photo.is_some(),
             gradient: gradient.is_some(),
-        };
-        let composed = photo.is_some()
+        }
+    }
+
+    /// Whether anything is composed: a layer, points, or an overlay with something to draw.
+    fn composes(
+        &self,
+        workspace: &Workspace,
+        photo: &Option<Arc<ColorImage>>,
+        gradient: &Option<Arc<ColorImage>>,
+    ) -> bool {
+        let overlays = self.overlays;
+        let session = &workspace.session;
+        photo.is_some()
             || gradient.is_some()
             || overlays.points
-            || (overlays.boundaries && segments.iter().any(Option::is_some))
+            || (overlays.boundaries && session.segments().iter().any(Option::is_some))
             || (overlays.leaf_outlines && workspace.leaves.is_some())
-            || (overlays.branches && !session.branches().branches.is_empty());
-        let recompose = composed && self.composite.as_ref().is_none_or(|(k, _)| *k != key);
-        // Branches projected into this view: for composing their curves, for the handles a
-        // branch tool shows and grabs, and for leaf-at-tip marks (not every frame otherwise).
-        let handles = if (overlays.branches
-            && (recompose
-                || tool.is_branch_tool()
-                || session.branches().branches.iter().any(|b| b.leaf_at_tip)))
-            || matches!(tool, Tool::MoveBranch | Tool::Radius)
-        {
-            branch_handles(workspace, view)
-        } else {
-            Vec::new()
+            || (overlays.branches && !session.branches().branches.is_empty())
+    }
+
+    /// Composes the photo, the gradient image and the overlays that go under the handles
+    /// (points, segment boundaries, leaf outlines, branch curves) into the panel's texture.
+    fn compose_ui(
+        &mut self,
+        ctx: &egui::Context,
+        workspace: &Workspace,
+        transform: &ViewTransform,
+        key: CompositeKey,
+        layers: &PhotoLayers,
+        handles: &[BranchHandles],
+    ) {
+        let started = std::time::Instant::now();
+        let pixels_per_point = ctx.pixels_per_point();
+        let mut canvas = layers.resample(transform, key.size, pixels_per_point);
+        let composer = Composer {
+            transform,
+            pixels_per_point,
         };
-        if !composed {
-            self.composite = None;
-        } else if recompose {
-            let started = std::time::Instant::now();
-            let mut canvas = match &photo {
-                Some(photo) => resample_photo(photo, size, &transform, key.size, pixels_per_point),
-                None => ColorImage::filled(key.size, Color32::TRANSPARENT),
-            };
-            if let Some(gradient) = &gradient {
-                let grey = resample_photo(gradient, size, &transform, key.size, pixels_per_point);
-                for (under, over) in canvas.pixels.iter_mut().zip(&grey.pixels) {
-                    *under = if photo.is_some() {
-                        under.blend(over.gamma_multiply_u8(200))
-                    } else {
-                        *over
-                    };
-                }
-            }
-            if let Some(projections) = projections.as_ref().filter(|_| overlays.points) {
-                splat_points(
-                    &mut canvas,
-                    projections,
-                    &transform,
-                    pixels_per_point,
-                    |point| {
-                        let segment = segment_of[point as usize];
-                        segment_color(segment, label_of(segment))
-                    },
-                );
-            }
-            let polyline = |canvas: &mut ColorImage, points: &[Pos2], closed, width, color| {
-                draw_polyline(
-                    canvas,
-                    &transform,
-                    pixels_per_point,
-                    points,
-                    closed,
-                    width,
-                    color,
-                );
-            };
-            if overlays.boundaries {
-                for (segment, state) in segments.iter().enumerate() {
-                    let (Some(state), Some(boundary)) =
-                        (state, session.boundary(segment as u32, view))
-                    else {
-                        continue;
-                    };
-                    let points: Vec<Pos2> = boundary
-                        .polygon
-                        .iter()
-                        .map(|&uv| transform.screen_from_image(uv))
-                        .collect();
-                    let color = segment_color(segment as i32, Some(state.label));
-                    polyline(&mut canvas, &points, true, 3.5, Color32::BLACK);
-                    polyline(&mut canvas, &points, true, 2.0, color);
-                }
-            }
-            if overlays.leaf_outlines {
-                for [a, b] in self.outlines(workspace) {
-                    let (Some(ua), Some(ub)) = (model.project(image, a), model.project(image, b))
-                    else {
-                        continue;
-                    };
-                    polyline(
-                        &mut canvas,
-                        &[
-                            transform.screen_from_image([ua.x, ua.y]),
-                            transform.screen_from_image([ub.x, ub.y]),
-                        ],
-                        false,
-                        1.5,
-                        Color32::from_rgb(255, 240, 90),
-                    );
-                }
-            }
-            if overlays.branches {
-                for handle in &handles {
-                    let curve: Vec<Pos2> = handle
-                        .curve
-                        .iter()
-                        .map(|&uv| transform.screen_from_image(uv))
-                        .collect();
-                    polyline(&mut canvas, &curve, false, 4.0, Color32::BLACK);
-                    polyline(&mut canvas, &curve, false, 2.0, WOOD);
-                }
-            }
-            let texture =
-                ui.ctx()
-                    .load_texture("photo_view", canvas, egui::TextureOptions::NEAREST);
-            self.composite = Some((key, texture));
-            self.last_compose_ms = Some(started.elapsed().as_secs_f32() * 1000.0);
+        let overlays = self.overlays;
+        let (session, view) = (&workspace.session, self.view);
+        if overlays.points {
+            let projected =
+                session
+                    .views()
+                    .projected(session.scene(), &session.segmentation().points, view);
+            let segment_of = session.segment_of();
+            splat_points(
+                &mut canvas,
+                &projected,
+                transform,
+                pixels_per_point,
+                |point| session_segment_color(workspace, segment_of[point as usize]),
+            );
         }
-        // Only the photo's part of the panel is drawn (the rest is transparent): fewer
-        // fragments for a software rasteriser.
+        if overlays.boundaries {
+            composer.boundaries(&mut canvas, workspace, view);
+        }
+        if overlays.leaf_outlines {
+            let model = &session.scene().reconstruction;
+            let image = &model.images()[view];
+            composer.leaf_outlines(&mut canvas, self.outlines(workspace), model, image);
+        }
+        if overlays.branches {
+            composer.branch_curves(&mut canvas, handles);
+        }
+        let texture = ctx.load_texture("photo_view", canvas, egui::TextureOptions::NEAREST);
+        self.composite = Some((key, texture));
+        self.last_compose_ms = Some(started.elapsed().as_secs_f32() * 1000.0);
+    }
+
+    /// Draws the composite over the photo's part of the panel (the rest of it is transparent:
+    /// fewer fragments for a software rasteriser).
+    fn composite_ui(&self, painter: &egui::Painter, image_rect: Rect, rect: Rect) {
         let shown = image_rect.intersect(rect);
         if let Some((_, texture)) = &self.composite
             && shown.is_positive()
@@ -940,141 +934,146 @@ impl ImagePanel {
             );
             painter.image(texture.id(), shown, uv, Color32::WHITE);
         }
-        let visible = rect.expand(4.0);
-        if overlays.edges
-            && let Some(projections) = &projections
-        {
-            let segmentation = session.segmentation();
-            let mut uv_of: HashMap<u32, [f32; 2]> = HashMap::with_capacity(projections.len());
-            uv_of.extend(projections.iter().copied());
-            let mut mesh = egui::Mesh::default();
-            for edge in &segmentation.graph.edges {
-                let a = segmentation.graph_points[edge.a as usize] as u32;
-                let b = segmentation.graph_points[edge.b as usize] as u32;
-                let (Some(ua), Some(ub)) = (uv_of.get(&a), uv_of.get(&b)) else {
-                    continue;
-                };
-                let pa = transform.screen_from_image([ua[0] as f64, ua[1] as f64]);
-                let pb = transform.screen_from_image([ub[0] as f64, ub[1] as f64]);
-                if !visible.contains(pa) && !visible.contains(pb) {
-                    continue;
-                }
-                // Kept edges bright, edges the partition cut red.
-                let color = if edge.weight > 0.0 {
-                    Color32::from_rgba_unmultiplied(230, 230, 230, 110)
-                } else {
-                    Color32::from_rgba_unmultiplied(255, 60, 60, 90)
-                };
-                add_segment(&mut mesh, pa, pb, 1.0, color);
-            }
-            painter.add(Shape::mesh(mesh));
-        }
-        if overlays.branches {
-            draw_branch_handles(&painter, &transform, &handles, tool);
-        }
+    }
 
-        // Tools.
+    /// Routes the primary button to the active tool: strokes (Split, Draw branch), handle
+    /// drags (Move point, Radius) or clicks (the others).
+    fn tool_input(
+        &mut self,
+        ui: &egui::Ui,
+        response: &egui::Response,
+        transform: &ViewTransform,
+        workspace: &Workspace,
+        handles: &[BranchHandles],
+        tool: Tool,
+    ) -> Vec<Action> {
+        let image_id = workspace.session.scene().reconstruction.images()[self.view].id;
         let pointer_image = response
             .interact_pointer_pos()
             .or(response.hover_pos())
             .map(|p| transform.image_from_screen(p));
-        let at = |pixel: [f64; 2]| PixelRef {
-            image_id: image.id,
-            pixel,
-        };
-        let primary = egui::PointerButton::Primary;
-        let press_origin = ui.input(|i| i.pointer.press_origin());
-        let response = response.on_hover_cursor(tool.cursor());
         match tool {
-            Tool::Navigate => {}
+            Tool::Navigate => Vec::new(),
             Tool::Split | Tool::DrawBranch => {
-                if response.drag_started_by(primary)
-                    && let Some(origin) = press_origin
-                {
-                    // The drag starts where the button went down, not where it was noticed.
-                    self.stroke = vec![transform.image_from_screen(origin)];
-                    if let Some(p) = pointer_image {
-                        self.stroke.push(p);
-                    }
-                } else if response.dragged_by(primary)
-                    && let Some(p) = pointer_image
-                    && let Some(last) = self.stroke.last()
-                {
-                    let moved = transform.screen_from_image(p) - transform.screen_from_image(*last);
-                    if moved.length() >= STROKE_STEP {
-                        self.stroke.push(p);
-                    }
-                } else if response.drag_stopped_by(primary) {
-                    let stroke = std::mem::take(&mut self.stroke);
-                    if stroke.len() >= 2 {
-                        actions.push(Action::Apply(if tool == Tool::Split {
-                            Command::SplitByStroke {
-                                image_id: image.id,
-                                stroke,
-                                closed: ui.input(|i| i.modifiers.shift),
-                            }
-                        } else {
-                            Command::DrawBranch {
-                                stroke: BranchStroke::Image {
-                                    image_id: image.id,
-                                    stroke,
-                                },
-                                radius: None,
-                            }
-                        }));
-                    }
-                }
+                self.stroke_input(ui, response, transform, pointer_image, image_id, tool)
             }
             Tool::MoveBranch | Tool::Radius => {
-                if response.drag_started_by(primary)
-                    && let Some(origin) = press_origin
-                {
-                    self.drag = grab_handle(&handles, &transform, origin, tool);
-                    if self.drag.is_none() {
-                        actions.push(Action::Message(
-                            if tool == Tool::MoveBranch {
-                                "no control point there: drag a square handle"
-                            } else {
-                                "no branch end there: drag from an end's circle"
-                            }
-                            .into(),
-                        ));
-                    }
-                } else if response.drag_stopped_by(primary)
-                    && let (Some(drag), Some(p)) = (self.drag.take(), pointer_image)
-                {
-                    actions.push(Action::Apply(match drag {
-                        BranchDrag::Move {
-                            branch,
-                            control_point,
-                        } => Command::MoveBranch {
-                            branch,
-                            control_point,
-                            to: BranchTarget::Image { at: at(p) },
-                        },
-                        BranchDrag::Radius {
-                            branch,
-                            end,
-                            center,
-                            px_per_metre,
-                        } => Command::SetRadius {
-                            branch,
-                            end,
-                            radius: (p[0] - center[0]).hypot(p[1] - center[1]) / px_per_metre,
-                        },
-                    }));
-                }
+                let press_origin = ui.input(|i| i.pointer.press_origin());
+                let pointer = (press_origin, pointer_image);
+                self.handle_input(response, transform, pointer, image_id, handles, tool)
             }
-            _ => {
-                if response.clicked()
-                    && let Some(p) = pointer_image
-                {
-                    actions.extend(self.click(workspace, tool, at(p), view));
-                }
+            _ => match pointer_image.filter(|_| response.clicked()) {
+                Some(pixel) => self.click(workspace, tool, PixelRef { image_id, pixel }, self.view),
+                None => Vec::new(),
+            },
+        }
+    }
+
+    /// A stroke of Split or Draw branch: samples while the button is down, the command when
+    /// it is released (Shift closes a split stroke).
+    fn stroke_input(
+        &mut self,
+        ui: &egui::Ui,
+        response: &egui::Response,
+        transform: &ViewTransform,
+        pointer_image: Option<[f64; 2]>,
+        image_id: ImageId,
+        tool: Tool,
+    ) -> Vec<Action> {
+        let primary = egui::PointerButton::Primary;
+        let press_origin = ui.input(|i| i.pointer.press_origin());
+        if response.drag_started_by(primary)
+            && let Some(origin) = press_origin
+        {
+            // The drag starts where the button went down, not where it was noticed.
+            self.stroke = vec![transform.image_from_screen(origin)];
+            if let Some(p) = pointer_image {
+                self.stroke.push(p);
+            }
+        } else if response.dragged_by(primary)
+            && let Some(p) = pointer_image
+            && let Some(last) = self.stroke.last()
+        {
+            let moved = transform.screen_from_image(p) - transform.screen_from_image(*last);
+            if moved.length() >= STROKE_STEP {
+                self.stroke.push(p);
+            }
+        } else if response.drag_stopped_by(primary) {
+            let stroke = std::mem::take(&mut self.stroke);
+            if stroke.len() >= 2 {
+                return vec![Action::Apply(if tool == Tool::Split {
+                    Command::SplitByStroke {
+                        image_id,
+                        stroke,
+                        closed: ui.input(|i| i.modifiers.shift),
+                    }
+                } else {
+                    Command::DrawBranch {
+                        stroke: BranchStroke::Image { image_id, stroke },
+                        radius: None,
+                    }
+                })];
             }
         }
+        Vec::new()
+    }
 
-        // Gestures in progress.
+    /// A handle drag of Move point or Radius: the handle under the press, the command where
+    /// it is released. `pointer`: where the button went down (screen) and where the pointer
+    /// is (image pixels).
+    fn handle_input(
+        &mut self,
+        response: &egui::Response,
+        transform: &ViewTransform,
+        pointer: (Option<Pos2>, Option<[f64; 2]>),
+        image_id: ImageId,
+        handles: &[BranchHandles],
+        tool: Tool,
+    ) -> Vec<Action> {
+        let primary = egui::PointerButton::Primary;
+        let (press_origin, pointer_image) = pointer;
+        if response.drag_started_by(primary)
+            && let Some(origin) = press_origin
+        {
+            // The grab distance is in screen points; the handles are in image pixels.
+            let tolerance_px = GRAB_DISTANCE as f64 / transform.zoom as f64;
+            self.drag = grab_handle(
+                tool,
+                handles,
+                transform.image_from_screen(origin),
+                tolerance_px,
+            );
+            if self.drag.is_none() {
+                return vec![Action::Message(
+                    if tool == Tool::MoveBranch {
+                        "no control point there: drag a square handle"
+                    } else {
+                        "no branch end there: drag from an end's circle"
+                    }
+                    .into(),
+                )];
+            }
+        } else if response.drag_stopped_by(primary)
+            && let (Some(drag), Some(pixel)) = (self.drag.take(), pointer_image)
+        {
+            let to = BranchTarget::Image {
+                at: PixelRef { image_id, pixel },
+            };
+            return vec![Action::Apply(release_handle(drag, pixel, to))];
+        }
+        Vec::new()
+    }
+
+    /// The gestures in progress: the stroke being drawn, the first merge click, the handle
+    /// being dragged.
+    fn gestures_ui(
+        &self,
+        ui: &egui::Ui,
+        painter: &egui::Painter,
+        response: &egui::Response,
+        transform: &ViewTransform,
+        image_id: ImageId,
+    ) {
         let accent = ui.visuals().selection.stroke.color;
         if self.stroke.len() >= 2 {
             let points: Vec<Pos2> = self
@@ -1089,7 +1088,7 @@ impl ImagePanel {
             painter.add(Shape::line(points, Stroke::new(2.0, accent)));
         }
         if let Some(first) = &self.merge_first
-            && first.image_id == image.id
+            && first.image_id == image_id
         {
             let p = transform.screen_from_image(first.pixel);
             painter.circle_stroke(p, 7.0, Stroke::new(2.5, accent));
@@ -1099,7 +1098,7 @@ impl ImagePanel {
         }
         if let (Some(drag), Some(hover)) = (self.drag, response.hover_pos()) {
             match drag {
-                BranchDrag::Move { .. } => {
+                HandlePick::ControlPoint { .. } => {
                     painter.rect_stroke(
                         Rect::from_center_size(hover, Vec2::splat(10.0)),
                         0.0,
@@ -1107,26 +1106,29 @@ impl ImagePanel {
                         egui::StrokeKind::Middle,
                     );
                 }
-                BranchDrag::Radius { center, .. } => {
-                    let c = transform.screen_from_image(center);
+                HandlePick::End { disc, .. } => {
+                    let c = transform.screen_from_uv(&disc.centre_px);
                     painter.circle_stroke(c, (hover - c).length(), Stroke::new(2.0, accent));
                 }
             }
         }
+    }
+
+    /// The status line at the panel's bottom left: photo name, its place, zoom.
+    fn status_ui(&self, painter: &egui::Painter, rect: Rect, name: &str, views: usize) {
         painter.text(
             rect.left_bottom() + vec2(10.0, -10.0),
             egui::Align2::LEFT_BOTTOM,
             format!(
                 "{}  ·  {}/{}  ·  {:.0} %",
-                image.name,
-                view + 1,
-                images.len(),
+                name,
+                self.view + 1,
+                views,
                 self.zoom * 100.0
             ),
             egui::FontId::proportional(13.0),
             Color32::from_gray(220),
         );
-        actions
     }
 
     /// A click of a click tool.
@@ -1196,72 +1198,181 @@ impl ImagePanel {
     }
 }
 
-/// A branch's handles projected in a view.
-struct BranchHandles {
-    branch: u32,
-    /// Skeleton samples (image pixels).
-    curve: Vec<[f64; 2]>,
-    control_points: Vec<[f64; 2]>,
-    /// End centres with their radius in pixels and pixels per metre.
-    ends: [Option<([f64; 2], f64, f64)>; 2],
-    leaf_at_tip: bool,
+/// A decoded layer of a view.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Layer {
+    Photo,
+    Gradient,
 }
 
-/// Image pixels per metre across the view ray at `p` (for radius circles and drags).
-fn px_per_metre(
-    model: &frond::scene::Reconstruction,
-    image: &frond::scene::Image,
-    p: &Point3<f64>,
-) -> Option<f64> {
-    let ray = p - image.center_world();
-    let distance = ray.norm();
-    let across = frond::branch::any_perpendicular(&ray.try_normalize(1e-12)?);
-    let step = distance * 1e-3;
-    let a = model.project(image, p)?;
-    let b = model.project(image, &(p + across * step))?;
-    let scale = (b - a).norm() / step;
-    (scale.is_finite() && scale > 0.0).then_some(scale)
+/// The photo and the gradient image a composite starts from, and the camera size (pixels)
+/// they cover.
+struct PhotoLayers {
+    photo: Option<Arc<ColorImage>>,
+    gradient: Option<Arc<ColorImage>>,
+    size: Vec2,
 }
 
-fn branch_handles(workspace: &Workspace, view: usize) -> Vec<BranchHandles> {
-    let model = &workspace.session.scene().reconstruction;
-    let image = &model.images()[view];
-    let project = |p: &Point3<f64>| model.project(image, p).map(|uv| [uv.x, uv.y]);
-    workspace
-        .session
-        .branches()
-        .branches
-        .iter()
-        .map(|branch| {
-            let skeleton = &branch.cylinder.skeleton;
-            let samples = skeleton.sample_by_arc_length(48);
-            let end = |p: &Point3<f64>, radius: f64| {
-                let uv = project(p)?;
-                let scale = px_per_metre(model, image, p)?;
-                Some((uv, radius * scale, scale))
-            };
-            let controls = skeleton.control_points();
-            BranchHandles {
-                branch: branch.id,
-                curve: samples.iter().filter_map(|(p, _)| project(p)).collect(),
-                control_points: controls.iter().filter_map(project).collect(),
-                ends: [
-                    controls
-                        .first()
-                        .and_then(|p| end(p, branch.cylinder.radius_start)),
-                    controls
-                        .last()
-                        .and_then(|p| end(p, branch.cylinder.radius_end)),
-                ],
-                leaf_at_tip: branch.leaf_at_tip,
+impl PhotoLayers {
+    /// The photo resampled into a panel-sized canvas of `size` texels, the gradient image
+    /// blended over it (or alone without a photo); transparent where neither is.
+    fn resample(
+        &self,
+        transform: &ViewTransform,
+        size: [usize; 2],
+        pixels_per_point: f32,
+    ) -> ColorImage {
+        let mut canvas = match &self.photo {
+            Some(photo) => resample_photo(photo, self.size, transform, size, pixels_per_point),
+            None => ColorImage::filled(size, Color32::TRANSPARENT),
+        };
+        if let Some(gradient) = &self.gradient {
+            let grey = resample_photo(gradient, self.size, transform, size, pixels_per_point);
+            for (under, over) in canvas.pixels.iter_mut().zip(&grey.pixels) {
+                *under = if self.photo.is_some() {
+                    under.blend(over.gamma_multiply_u8(200))
+                } else {
+                    *over
+                };
             }
-        })
-        .collect()
+        }
+        canvas
+    }
+}
+
+/// Draws the line overlays of a composite into its canvas: the panel's transform and texels
+/// per screen point.
+struct Composer<'a> {
+    transform: &'a ViewTransform,
+    pixels_per_point: f32,
+}
+
+impl Composer<'_> {
+    /// [`draw_polyline`] through screen points, `width` points wide.
+    fn polyline(
+        &self,
+        canvas: &mut ColorImage,
+        points: &[Pos2],
+        closed: bool,
+        width: f32,
+        color: Color32,
+    ) {
+        draw_polyline(
+            canvas,
+            self.transform,
+            self.pixels_per_point,
+            points,
+            closed,
+            width,
+            color,
+        );
+    }
+
+    /// Every segment's image boundary computed in view `view`, outlined in black under its
+    /// segment colour.
+    fn boundaries(&self, canvas: &mut ColorImage, workspace: &Workspace, view: usize) {
+        let session = &workspace.session;
+        for (segment, state) in session.segments().iter().enumerate() {
+            let (Some(state), Some(boundary)) = (state, session.boundary(segment as u32, view))
+            else {
+                continue;
+            };
+            let points: Vec<Pos2> = boundary
+                .polygon
+                .iter()
+                .map(|&uv| self.transform.screen_from_image(uv))
+                .collect();
+            let color = segment_color(segment as i32, Some(state.label));
+            self.polyline(canvas, &points, true, 3.5, Color32::BLACK);
+            self.polyline(canvas, &points, true, 2.0, color);
+        }
+    }
+
+    /// The fitted leaves' outlines (world segments) projected into `image`.
+    fn leaf_outlines(
+        &self,
+        canvas: &mut ColorImage,
+        outlines: &[[Point3<f64>; 2]],
+        model: &Reconstruction,
+        image: &Image,
+    ) {
+        for [a, b] in outlines {
+            let (Some(ua), Some(ub)) = (model.project(image, a), model.project(image, b)) else {
+                continue;
+            };
+            let ends = [
+                self.transform.screen_from_uv(&ua),
+                self.transform.screen_from_uv(&ub),
+            ];
+            self.polyline(canvas, &ends, false, 1.5, Color32::from_rgb(255, 240, 90));
+        }
+    }
+
+    /// The branches' skeleton curves, in wood colour over a black outline.
+    fn branch_curves(&self, canvas: &mut ColorImage, handles: &[BranchHandles]) {
+        for handle in handles {
+            let curve: Vec<Pos2> = handle
+                .curve_px
+                .iter()
+                .map(|uv| self.transform.screen_from_uv(uv))
+                .collect();
+            self.polyline(canvas, &curve, false, 4.0, Color32::BLACK);
+            self.polyline(canvas, &curve, false, 2.0, WOOD);
+        }
+    }
+}
+
+/// The colour of a segment as the session labels it.
+fn session_segment_color(workspace: &Workspace, segment: i32) -> Color32 {
+    let segments = workspace.session.segments();
+    let label = (segment >= 0)
+        .then(|| segments.get(segment as usize).copied().flatten())
+        .flatten()
+        .map(|s| s.label);
+    segment_color(segment, label)
+}
+
+/// The segmentation graph's edges between points view `view` sees, as thin quads over the
+/// composite: kept edges bright, edges the partition cut red.
+fn graph_edges_ui(
+    painter: &egui::Painter,
+    transform: &ViewTransform,
+    workspace: &Workspace,
+    view: usize,
+) {
+    let session = &workspace.session;
+    let segmentation = session.segmentation();
+    let projected = session
+        .views()
+        .projected(session.scene(), &segmentation.points, view);
+    let visible = transform.rect.expand(4.0);
+    let mut uv_of: HashMap<u32, Point2<f64>> = HashMap::with_capacity(projected.len());
+    uv_of.extend(projected.iter().map(|p| (p.point, p.uv_image)));
+    let mut mesh = egui::Mesh::default();
+    for edge in &segmentation.graph.edges {
+        let a = segmentation.graph_points[edge.a as usize] as u32;
+        let b = segmentation.graph_points[edge.b as usize] as u32;
+        let (Some(ua), Some(ub)) = (uv_of.get(&a), uv_of.get(&b)) else {
+            continue;
+        };
+        let pa = transform.screen_from_uv(ua);
+        let pb = transform.screen_from_uv(ub);
+        if !visible.contains(pa) && !visible.contains(pb) {
+            continue;
+        }
+        let color = if edge.weight > 0.0 {
+            Color32::from_rgba_unmultiplied(230, 230, 230, 110)
+        } else {
+            Color32::from_rgba_unmultiplied(255, 60, 60, 90)
+        };
+        add_segment(&mut mesh, pa, pb, 1.0, color);
+    }
+    painter.add(Shape::mesh(mesh));
 }
 
 /// What goes over the composite for branches: the leaf-at-tip marks, and the handles while a
 /// branch tool is active (the curves are in the composite).
-fn draw_branch_handles(
+fn branch_handles_ui(
     painter: &egui::Painter,
     transform: &ViewTransform,
     handles: &[BranchHandles],
@@ -1271,26 +1382,26 @@ fn draw_branch_handles(
     // plant with a hundred branches is otherwise cluttered, and slow on a software rasteriser.
     let show_handles = tool.is_branch_tool();
     for handle in handles {
-        for (uv, radius_px, _) in handle.ends.iter().flatten().filter(|_| show_handles) {
-            let c = transform.screen_from_image(*uv);
+        for disc in handle.ends.iter().flatten().filter(|_| show_handles) {
+            let c = transform.screen_from_uv(&disc.centre_px);
             painter.circle_stroke(
                 c,
-                (*radius_px as f32 * transform.zoom).max(2.0),
+                (disc.radius_px as f32 * transform.zoom).max(2.0),
                 Stroke::new(1.5, Color32::from_rgb(255, 200, 120)),
             );
         }
         if handle.leaf_at_tip
-            && let Some((uv, _, _)) = handle.ends[1]
+            && let Some(tip) = handle.ends[1]
         {
             painter.circle_filled(
-                transform.screen_from_image(uv),
+                transform.screen_from_uv(&tip.centre_px),
                 5.0,
                 Color32::from_rgb(120, 220, 90),
             );
         }
         if show_handles {
-            for &uv in &handle.control_points {
-                let p = transform.screen_from_image(uv);
+            for uv in handle.control_points_px.iter().flatten() {
+                let p = transform.screen_from_uv(uv);
                 let square = Rect::from_center_size(p, Vec2::splat(7.0));
                 painter.rect_filled(square, 0.0, Color32::BLACK);
                 painter.rect_stroke(
@@ -1301,9 +1412,9 @@ fn draw_branch_handles(
                 );
             }
         }
-        if show_handles && let Some(first) = handle.curve.first() {
+        if show_handles && let Some(first) = handle.curve_px.first() {
             painter.text(
-                transform.screen_from_image(*first) + vec2(6.0, -6.0),
+                transform.screen_from_uv(first) + vec2(6.0, -6.0),
                 egui::Align2::LEFT_BOTTOM,
                 format!("{}", handle.branch),
                 egui::FontId::proportional(11.0),
@@ -1311,58 +1422,6 @@ fn draw_branch_handles(
             );
         }
     }
-}
-
-/// The handle under a press: a control point (Move) or a branch end (Radius).
-fn grab_handle(
-    handles: &[BranchHandles],
-    transform: &ViewTransform,
-    pointer: Pos2,
-    tool: Tool,
-) -> Option<BranchDrag> {
-    let mut best: Option<(f32, BranchDrag)> = None;
-    let mut consider = |distance: f32, drag: BranchDrag| {
-        if distance <= GRAB_DISTANCE && best.as_ref().is_none_or(|(d, _)| distance < *d) {
-            best = Some((distance, drag));
-        }
-    };
-    for handle in handles {
-        if tool == Tool::MoveBranch {
-            for (control_point, &uv) in handle.control_points.iter().enumerate() {
-                consider(
-                    (transform.screen_from_image(uv) - pointer).length(),
-                    BranchDrag::Move {
-                        branch: handle.branch,
-                        control_point,
-                    },
-                );
-            }
-        } else {
-            for (k, end) in handle.ends.iter().enumerate() {
-                let Some((uv, radius_px, px_per_metre)) = end else {
-                    continue;
-                };
-                let c = transform.screen_from_image(*uv);
-                // On the circle or inside it.
-                let from_centre = (c - pointer).length();
-                let radius = *radius_px as f32 * transform.zoom;
-                consider(
-                    (from_centre - radius).abs().min(from_centre),
-                    BranchDrag::Radius {
-                        branch: handle.branch,
-                        end: if k == 0 {
-                            BranchEnd::Start
-                        } else {
-                            BranchEnd::End
-                        },
-                        center: *uv,
-                        px_per_metre: *px_per_metre,
-                    },
-                );
-            }
-        }
-    }
-    best.map(|(_, drag)| drag)
 }
 
 #[cfg(test)]
@@ -1393,11 +1452,14 @@ mod tests {
             center: vec2(50.0, 40.0),
             zoom: 1.0,
         };
-        let projections = [
-            (0u32, [10.5f32, 20.5]),
-            (1, [90.0, 70.0]),
-            (2, [500.0, 10.0]),
-        ];
+        let projections =
+            [(0u32, [10.5, 20.5]), (1, [90.0, 70.0]), (2, [500.0, 10.0])].map(|(point, [u, v])| {
+                Projected {
+                    point,
+                    uv_image: Point2::new(u, v),
+                    depth_camera: 1.0,
+                }
+            });
         let mut image = ColorImage::filled([200, 160], Color32::TRANSPARENT);
         splat_points(&mut image, &projections, &transform, 2.0, |p| {
             [Color32::RED, Color32::GREEN, Color32::BLUE][p as usize]

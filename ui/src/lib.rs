@@ -4,6 +4,14 @@
 //! `Session` (so it is undoable and saved in the project's history), and long work (opening and
 //! segmenting, fitting leaves, the automatic skeleton, export) runs on a worker thread with a
 //! progress bar and a Cancel button.
+//!
+//! This file draws the window (menus, tool strip, side panel with segments, branches and
+//! history, status bar, dialogs, the central photo / 3D layout) and routes shortcuts, menu
+//! choices and panel actions to the library: `Session::{apply, undo, redo}` through
+//! `workspace::Workspace`, the reads `Session::{segmentation, segments, branches, history,
+//! scene}`, `frond::util::atomic::write_atomic` for the benchmark report and
+//! `frond::util::stats::TimingSummary` for its frame-time statistics (the benchmark drives the
+//! 3D view and an edit per frame and only records times).
 
 pub mod files;
 pub mod image_view;
@@ -88,13 +96,6 @@ fn remove_autosave(config: &ConfigDir, workspace: &Workspace) {
 
 /// Frames of the benchmark's editing phase (at most).
 const EDIT_BENCHMARK_FRAMES: usize = 20;
-
-/// Nearest-rank percentile of frame times (0 when there are none).
-fn percentile(values: &[f32], q: f64) -> f32 {
-    let mut values: Vec<f64> = values.iter().map(|&v| v as f64).collect();
-    let value = frond::util::stats::quantile(&mut values, q);
-    if value.is_nan() { 0.0 } else { value as f32 }
-}
 
 /// A message in the status bar.
 #[derive(Clone, Debug)]
@@ -877,10 +878,11 @@ impl FrondApp {
         });
         let stats = |samples: &[[f32; 3]], k: usize| {
             let values: Vec<f32> = samples.iter().map(|s| s[k]).collect();
+            let summary = frond::util::stats::TimingSummary::of(&values);
             serde_json::json!({
-                "mean": values.iter().sum::<f32>() / values.len().max(1) as f32,
-                "median": percentile(&values, 0.5),
-                "p95": percentile(&values, 0.95),
+                "mean": summary.mean,
+                "median": summary.median,
+                "p95": summary.p95,
             })
         };
         let phase_report = |samples: &[[f32; 3]]| {

@@ -1,4 +1,6 @@
 //! `frond-ui`: opens the Frond GUI, optionally on a COLMAP folder given on the command line.
+//! Parses the arguments (overlays, layout, benchmark) and starts eframe with `FrondApp`; draws
+//! nothing itself and calls no library algorithm.
 
 use std::path::PathBuf;
 

@@ -1,7 +1,13 @@
 //! The editing tools: what each does, its shortcut, its cursor and the hint shown while it is
-//! active.
+//! active; and the input routing of the two handle-dragging tools (Move point, Radius) shared
+//! by the photo and the 3D view: which handle a press grabs and which command its release
+//! applies. Draws nothing. Library calls: `frond::branch::handles::{nearest_control_point,
+//! nearest_end}` for the grab, `EndDisc::radius_through` for a radius.
 
 use egui::{CursorIcon, Key};
+use frond::branch::handles::{BranchHandles, HandlePick, nearest_control_point, nearest_end};
+use frond::edit::{BranchEnd, BranchTarget, Command};
+use nalgebra::Point2;
 
 /// An editing tool of the image panel.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -183,6 +189,48 @@ impl Tool {
                 | Tool::Reset
                 | Tool::GenericLeaf
         )
+    }
+}
+
+/// The handle a press of `tool` grabs at `pixel_px` within `tolerance_px` (pixels of the view
+/// the handles were projected into): a control point for Move point, a branch end's disc for
+/// Radius; nothing for the other tools.
+pub fn grab_handle(
+    tool: Tool,
+    handles: &[BranchHandles],
+    pixel_px: [f64; 2],
+    tolerance_px: f64,
+) -> Option<HandlePick> {
+    let pixel_px = Point2::from(pixel_px);
+    match tool {
+        Tool::MoveBranch => nearest_control_point(handles, &pixel_px, tolerance_px),
+        Tool::Radius => nearest_end(handles, &pixel_px, tolerance_px),
+        _ => None,
+    }
+}
+
+/// The command that releasing a grabbed handle at `pixel_px` applies: a control point moves to
+/// `to` (the same release, as the view's command names it); an end's radius becomes that of the
+/// disc through the release.
+pub fn release_handle(grabbed: HandlePick, pixel_px: [f64; 2], to: BranchTarget) -> Command {
+    match grabbed {
+        HandlePick::ControlPoint {
+            branch,
+            control_point,
+        } => Command::MoveBranch {
+            branch,
+            control_point,
+            to,
+        },
+        HandlePick::End { branch, end, disc } => Command::SetRadius {
+            branch,
+            end: if end == 0 {
+                BranchEnd::Start
+            } else {
+                BranchEnd::End
+            },
+            radius: disc.radius_through(&Point2::from(pixel_px)),
+        },
     }
 }
 

@@ -3,24 +3,33 @@
 //! targets and composited into the window's render pass through an `egui_wgpu` callback. An
 //! orbit camera turns about the plant: drag to orbit, right or middle drag to pan, scroll to
 //! zoom, double-click to frame the plant again. While the view moves, a quarter of the points
-//! is drawn at half resolution; the full frame follows once it stops.
+//! is drawn at half resolution; the full frame follows once it stops. The branch tools work
+//! here too, in pixels of the orbit camera's view.
+//!
+//! Library calls: the marker meshes `TriMesh::{add_octahedron, add_tetrahedron, add_frustum}`
+//! with `scene::PhotoView::frustum_corners_world`, `BranchTree::mesh` for the branches,
+//! `render::Renderer` to upload and draw (from the orbit's `render::ViewCamera`),
+//! `branch::handles::project_branches` for the handles a drag grabs (through
+//! `tools::{grab_handle, release_handle}`) and `Session::pick_branch_in_view` for clicks.
 
 use std::sync::Arc;
 
 use eframe::egui_wgpu::{self, CallbackResources, CallbackTrait, RenderState};
 use eframe::wgpu;
 use egui::{Color32, Sense};
+use frond::branch::handles::{HandlePick, project_branches};
 use frond::branch::{CylinderMeshing, any_perpendicular};
 use frond::mesh::TriMesh;
 use frond::render::{GpuScene, Lighting, MeshHandle, Renderer, TextureHandle, ViewCamera};
+use frond::scene::PhotoView;
 use frond::segment::foreground::PointClass;
 use image::RgbaImage;
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
 use crate::image_view::{Action, segment_color};
-use crate::tools::Tool;
+use crate::tools::{Tool, grab_handle, release_handle};
 use crate::workspace::Workspace;
-use frond::edit::{BranchEnd, BranchStroke, BranchTarget, Command, ViewCamera as EditCamera};
+use frond::edit::{BranchStroke, BranchTarget, Command, ViewCamera as EditCamera};
 
 /// Side of the palette texture: colour `k` is texel `(k mod side, k div side)`.
 const PALETTE_SIDE: u32 = 64;
@@ -242,82 +251,6 @@ fn palette_uv(index: u32) -> [f32; 2] {
     ]
 }
 
-/// An octahedron of radius `r` about `p`, coloured by palette entry `colour`.
-fn add_octahedron(mesh: &mut TriMesh, p: &Point3<f64>, r: f64, colour: u32) {
-    let base = mesh.positions.len() as u32;
-    let uv = palette_uv(colour);
-    for axis in [
-        Vector3::x(),
-        -Vector3::x(),
-        Vector3::y(),
-        -Vector3::y(),
-        Vector3::z(),
-        -Vector3::z(),
-    ] {
-        mesh.positions.push((p + axis * r).cast::<f32>());
-        mesh.normals.push(axis.cast::<f32>());
-        mesh.uvs.push(uv);
-    }
-    for (a, b, c) in [
-        (0, 2, 4),
-        (2, 1, 4),
-        (1, 3, 4),
-        (3, 0, 4),
-        (2, 0, 5),
-        (1, 2, 5),
-        (3, 1, 5),
-        (0, 3, 5),
-    ] {
-        mesh.triangles.push([base + a, base + b, base + c]);
-    }
-}
-
-/// A regular tetrahedron of circumradius `r` about `p` (half an octahedron's triangles: the
-/// points drawn while the view moves, when triangle setup is most of a software rasteriser's
-/// work), coloured by palette entry `colour`.
-fn add_tetrahedron(mesh: &mut TriMesh, p: &Point3<f64>, r: f64, colour: u32) {
-    let base = mesh.positions.len() as u32;
-    let uv = palette_uv(colour);
-    for corner in [
-        Vector3::new(1.0, 1.0, 1.0),
-        Vector3::new(1.0, -1.0, -1.0),
-        Vector3::new(-1.0, 1.0, -1.0),
-        Vector3::new(-1.0, -1.0, 1.0),
-    ] {
-        let direction = corner / 3f64.sqrt();
-        mesh.positions.push((p + direction * r).cast::<f32>());
-        mesh.normals.push(direction.cast::<f32>());
-        mesh.uvs.push(uv);
-    }
-    // Counter-clockwise seen from outside, as the octahedron's.
-    for (a, b, c) in [(1, 3, 2), (0, 2, 3), (0, 3, 1), (0, 1, 2)] {
-        mesh.triangles.push([base + a, base + b, base + c]);
-    }
-}
-
-/// A square bar of half-width `w` from `a` to `b`.
-fn add_bar(mesh: &mut TriMesh, a: &Point3<f64>, b: &Point3<f64>, w: f64, colour: u32) {
-    let axis = b - a;
-    if axis.norm() < 1e-12 {
-        return;
-    }
-    let u = any_perpendicular(&axis.normalize());
-    let v = axis.normalize().cross(&u);
-    let uv = palette_uv(colour);
-    for (side, normal) in [(u, v), (v, -u), (-u, -v), (-v, u)] {
-        let base = mesh.positions.len() as u32;
-        let offset_a = side * w + normal * w;
-        let offset_b = side * w - normal * w;
-        for p in [a + offset_a, a + offset_b, b + offset_b, b + offset_a] {
-            mesh.positions.push(p.cast::<f32>());
-            mesh.normals.push(side.cast::<f32>());
-            mesh.uvs.push(uv);
-        }
-        mesh.triangles.push([base, base + 1, base + 2]);
-        mesh.triangles.push([base, base + 2, base + 3]);
-    }
-}
-
 impl SceneData {
     /// Builds the panel's content from the workspace.
     pub fn build(workspace: &Workspace, extent: f64) -> Self {
@@ -374,9 +307,9 @@ impl SceneData {
             };
             // A fixed quarter of the points (by an index hash) while the view moves.
             if (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 62 == 0 {
-                add_tetrahedron(&mut moving, p, point_radius, colour);
+                moving.add_tetrahedron(p, point_radius, palette_uv(colour));
             }
-            add_octahedron(&mut points, p, point_radius, colour);
+            points.add_octahedron(p, point_radius, palette_uv(colour));
             shown += 1;
         }
 
@@ -397,39 +330,24 @@ impl SceneData {
             ];
             for (p, radius) in ends {
                 if let Some(p) = p {
-                    add_octahedron(&mut handles, p, (radius * 1.3).max(extent * 0.006), HANDLE);
+                    handles.add_octahedron(
+                        p,
+                        (radius * 1.3).max(extent * 0.006),
+                        palette_uv(HANDLE),
+                    );
                 }
             }
         }
         // Camera frusta, a tenth of the plant's extent deep.
         let model = &session.scene().reconstruction;
         for image in model.images() {
-            let camera = model.camera_of(image);
-            let (fx, fy, cx, cy) = camera.focal_and_principal_point();
-            let world_from_camera = image.camera_from_world.inverse();
-            let depth = extent * 0.1;
-            let corner = |u: f64, v: f64| {
-                world_from_camera * Point3::new((u - cx) / fx * depth, (v - cy) / fy * depth, depth)
-            };
-            let (w, h) = (camera.width as f64, camera.height as f64);
-            let corners = [
-                corner(0.0, 0.0),
-                corner(w, 0.0),
-                corner(w, h),
-                corner(0.0, h),
-            ];
-            let centre = image.center_world();
-            let bar = extent * 0.0015;
-            for k in 0..4 {
-                add_bar(&mut handles, &centre, &corners[k], bar, FRUSTUM);
-                add_bar(
-                    &mut handles,
-                    &corners[k],
-                    &corners[(k + 1) % 4],
-                    bar,
-                    FRUSTUM,
-                );
-            }
+            let corners = PhotoView::new(model, image).frustum_corners_world(extent * 0.1);
+            handles.add_frustum(
+                &image.center_world(),
+                &corners,
+                extent * 0.0015,
+                palette_uv(FRUSTUM),
+            );
         }
 
         let leaves = workspace
@@ -454,6 +372,22 @@ impl SceneData {
             points: shown,
         }
     }
+}
+
+/// The status line at the panel's bottom left: what the 3D view shows.
+fn status_ui(painter: &egui::Painter, rect: egui::Rect, data: &SceneData, workspace: &Workspace) {
+    painter.text(
+        rect.left_bottom() + egui::vec2(10.0, -10.0),
+        egui::Align2::LEFT_BOTTOM,
+        format!(
+            "3D · {} points · {} leaves · {} branches",
+            data.points,
+            data.leaves.len(),
+            workspace.session.branches().branches.len()
+        ),
+        egui::FontId::proportional(13.0),
+        Color32::from_gray(220),
+    );
 }
 
 /// A scene on the GPU: the content key it was built for, and what each mesh is.
@@ -784,23 +718,7 @@ pub struct View3d {
     pub last_build_ms: Option<f32>,
     /// A branch stroke being drawn (pixels of this view) and a grabbed handle.
     stroke: Vec<[f64; 2]>,
-    grabbed: Option<Grab>,
-}
-
-/// A handle held during a drag in the 3D view.
-#[derive(Clone, Copy, Debug)]
-enum Grab {
-    ControlPoint {
-        branch: u32,
-        control_point: usize,
-    },
-    /// A branch end: its centre (pixels of this view) and pixels per metre at its depth.
-    Radius {
-        branch: u32,
-        end: BranchEnd,
-        centre: [f64; 2],
-        px_per_metre: f64,
-    },
+    grabbed: Option<HandlePick>,
 }
 
 impl View3d {
@@ -865,7 +783,7 @@ impl View3d {
         let (rect, response) = ui.allocate_exact_size(ui.available_size(), Sense::click_and_drag());
         self.rect = Some(rect);
         let data = self.data(workspace);
-        let Some(orbit) = self.orbit.as_mut() else {
+        if self.orbit.is_none() {
             ui.painter().text(
                 rect.center(),
                 egui::Align2::CENTER_CENTER,
@@ -874,26 +792,8 @@ impl View3d {
                 Color32::from_gray(160),
             );
             return actions;
-        };
-        let drag_tool = matches!(tool, Tool::DrawBranch | Tool::MoveBranch | Tool::Radius);
-        if response.dragged_by(egui::PointerButton::Primary) && !drag_tool {
-            orbit.rotate(response.drag_delta());
         }
-        if response.dragged_by(egui::PointerButton::Secondary)
-            || response.dragged_by(egui::PointerButton::Middle)
-        {
-            orbit.pan(response.drag_delta(), rect.width().min(rect.height()));
-        }
-        if response.hovered() {
-            let (scroll, pinch) = ui.input(|i| (i.smooth_scroll_delta.y, i.zoom_delta()));
-            let factor = (scroll as f64 * 0.002).exp() * pinch as f64;
-            if (factor - 1.0).abs() > 1e-6 {
-                orbit.zoom(factor);
-            }
-        }
-        if response.double_clicked() {
-            self.orbit = Orbit::frame(workspace);
-        }
+        self.orbit_input(ui, &response, workspace, tool);
         let Some(orbit) = self.orbit else {
             return actions;
         };
@@ -940,35 +840,63 @@ impl View3d {
                 Color32::from_gray(160),
             );
         }
-        painter.text(
-            rect.left_bottom() + egui::vec2(10.0, -10.0),
-            egui::Align2::LEFT_BOTTOM,
-            format!(
-                "3D · {} points · {} leaves · {} branches",
-                data.points,
-                data.leaves.len(),
-                workspace.session.branches().branches.len()
-            ),
-            egui::FontId::proportional(13.0),
-            Color32::from_gray(220),
-        );
+        status_ui(&painter, rect, &data, workspace);
+        self.gestures_ui(ui, &painter, &response);
+        actions
+    }
+
+    /// Orbits with the primary button (unless a branch tool drags with it), pans with the
+    /// right or middle button, zooms with the wheel or a pinch, frames the plant again on a
+    /// double click.
+    fn orbit_input(
+        &mut self,
+        ui: &egui::Ui,
+        response: &egui::Response,
+        workspace: &Workspace,
+        tool: Tool,
+    ) {
+        let Some(orbit) = self.orbit.as_mut() else {
+            return;
+        };
+        let rect = response.rect;
+        let drag_tool = matches!(tool, Tool::DrawBranch | Tool::MoveBranch | Tool::Radius);
+        if response.dragged_by(egui::PointerButton::Primary) && !drag_tool {
+            orbit.rotate(response.drag_delta());
+        }
+        if response.dragged_by(egui::PointerButton::Secondary)
+            || response.dragged_by(egui::PointerButton::Middle)
+        {
+            orbit.pan(response.drag_delta(), rect.width().min(rect.height()));
+        }
+        if response.hovered() {
+            let (scroll, pinch) = ui.input(|i| (i.smooth_scroll_delta.y, i.zoom_delta()));
+            let factor = (scroll as f64 * 0.002).exp() * pinch as f64;
+            if (factor - 1.0).abs() > 1e-6 {
+                orbit.zoom(factor);
+            }
+        }
+        if response.double_clicked() {
+            self.orbit = Orbit::frame(workspace);
+        }
+    }
+
+    /// The gestures in progress: the branch stroke being drawn, the radius being dragged.
+    fn gestures_ui(&self, ui: &egui::Ui, painter: &egui::Painter, response: &egui::Response) {
+        let rect = response.rect;
+        let pixels_per_point = ui.ctx().pixels_per_point();
+        let accent = ui.visuals().selection.stroke.color;
+        let screen =
+            |[x, y]: [f64; 2]| rect.min + egui::vec2(x as f32, y as f32) / pixels_per_point;
         if self.stroke.len() >= 2 {
-            let accent = ui.visuals().selection.stroke.color;
-            let points: Vec<egui::Pos2> = self
-                .stroke
-                .iter()
-                .map(|&[x, y]| rect.min + egui::vec2(x as f32, y as f32) / pixels_per_point)
-                .collect();
+            let points: Vec<egui::Pos2> = self.stroke.iter().map(|&p| screen(p)).collect();
             painter.add(egui::Shape::line(points, egui::Stroke::new(2.0, accent)));
         }
-        if let (Some(Grab::Radius { centre, .. }), Some(hover)) =
+        if let (Some(HandlePick::End { disc, .. }), Some(hover)) =
             (self.grabbed, response.hover_pos())
         {
-            let accent = ui.visuals().selection.stroke.color;
-            let c = rect.min + egui::vec2(centre[0] as f32, centre[1] as f32) / pixels_per_point;
+            let c = screen([disc.centre_px.x, disc.centre_px.y]);
             painter.circle_stroke(c, (hover - c).length(), egui::Stroke::new(2.0, accent));
         }
-        actions
     }
 
     /// The editing session's camera for this view (pixels at full resolution).
@@ -1039,12 +967,12 @@ impl View3d {
                 self.stroke = vec![to_pixel(origin)];
             } else {
                 let view = orbit.view_camera(camera.width, camera.height);
+                let handles = project_branches(session.branches(), &view, 0);
                 self.grabbed = grab_handle(
-                    workspace,
-                    &view,
+                    tool,
+                    &handles,
                     to_pixel(origin),
                     GRAB_DISTANCE_PX * pixels_per_point as f64,
-                    tool,
                 );
                 if self.grabbed.is_none() {
                     return vec![Action::Message(
@@ -1075,91 +1003,14 @@ impl View3d {
                         radius: None,
                     })];
                 }
-            } else if let (Some(grab), Some(p)) = (self.grabbed.take(), pointer) {
+            } else if let (Some(grabbed), Some(p)) = (self.grabbed.take(), pointer) {
                 let pixel = to_pixel(p);
-                return vec![Action::Apply(match grab {
-                    Grab::ControlPoint {
-                        branch,
-                        control_point,
-                    } => Command::MoveBranch {
-                        branch,
-                        control_point,
-                        to: BranchTarget::View { camera, pixel },
-                    },
-                    Grab::Radius {
-                        branch,
-                        end,
-                        centre,
-                        px_per_metre,
-                    } => Command::SetRadius {
-                        branch,
-                        end,
-                        radius: (pixel[0] - centre[0]).hypot(pixel[1] - centre[1]) / px_per_metre,
-                    },
-                })];
+                let to = BranchTarget::View { camera, pixel };
+                return vec![Action::Apply(release_handle(grabbed, pixel, to))];
             }
         }
         Vec::new()
     }
-}
-
-/// The handle nearest to `target` (pixels of `view`) within `tolerance`: a control point
-/// (Move) or a branch end, on its projected radius or inside it (Radius).
-fn grab_handle(
-    workspace: &Workspace,
-    view: &ViewCamera,
-    target: [f64; 2],
-    tolerance: f64,
-    tool: Tool,
-) -> Option<Grab> {
-    let mut best: Option<(f64, Grab)> = None;
-    let mut consider = |distance: f64, grab: Grab| {
-        if distance <= tolerance && best.is_none_or(|(d, _)| distance < d) {
-            best = Some((distance, grab));
-        }
-    };
-    for branch in &workspace.session.branches().branches {
-        let controls = branch.cylinder.skeleton.control_points();
-        if tool == Tool::MoveBranch {
-            for (control_point, p) in controls.iter().enumerate() {
-                if let Some((uv, _)) = view.project(p) {
-                    consider(
-                        (uv.x - target[0]).hypot(uv.y - target[1]),
-                        Grab::ControlPoint {
-                            branch: branch.id,
-                            control_point,
-                        },
-                    );
-                }
-            }
-            continue;
-        }
-        let ends = [
-            (
-                BranchEnd::Start,
-                controls.first(),
-                branch.cylinder.radius_start,
-            ),
-            (BranchEnd::End, controls.last(), branch.cylinder.radius_end),
-        ];
-        for (end, p, radius) in ends {
-            let Some((uv, depth)) = p.and_then(|p| view.project(p)) else {
-                continue;
-            };
-            let px_per_metre = view.fx / depth;
-            let from_centre = (uv.x - target[0]).hypot(uv.y - target[1]);
-            consider(
-                (from_centre - radius * px_per_metre).abs().min(from_centre),
-                Grab::Radius {
-                    branch: branch.id,
-                    end,
-                    centre: [uv.x, uv.y],
-                    px_per_metre,
-                },
-            );
-        }
-    }
-    best.map(|(_, grab)| grab)
 }
 
 #[cfg(test)]
@@ -1217,60 +1068,19 @@ mod tests {
     }
 
     #[test]
-    fn octahedra_and_bars_are_closed_and_use_their_palette_texel() {
-        let mut mesh = TriMesh::default();
-        add_octahedron(&mut mesh, &Point3::origin(), 1.0, 5);
-        add_bar(
-            &mut mesh,
-            &Point3::origin(),
-            &Point3::new(0.0, 0.0, 1.0),
-            0.1,
-            7,
-        );
-        assert_eq!(mesh.positions.len(), 6 + 16);
-        assert_eq!(mesh.triangles.len(), 8 + 8);
-        assert_eq!(mesh.uvs[0], palette_uv(5));
-        assert_eq!(mesh.uvs[6], palette_uv(7));
-        assert_ne!(palette_uv(5), palette_uv(7));
-        // Every octahedron edge is shared by exactly two triangles.
-        let mut edges = std::collections::HashMap::new();
-        for t in &mesh.triangles[..8] {
-            for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
-                *edges.entry((a.min(b), a.max(b))).or_insert(0) += 1;
-            }
+    fn palette_entries_are_distinct_texel_centres() {
+        let uvs: Vec<[f32; 2]> = (0..PALETTE_SIDE * PALETTE_SIDE).map(palette_uv).collect();
+        let texel = 1.0 / PALETTE_SIDE as f32;
+        for (k, uv) in uvs.iter().enumerate() {
+            // The centre of texel (k mod side, k div side).
+            let (x, y) = (k as u32 % PALETTE_SIDE, k as u32 / PALETTE_SIDE);
+            assert_eq!(*uv, [(x as f32 + 0.5) * texel, (y as f32 + 0.5) * texel]);
         }
-        assert!(edges.values().all(|&n| n == 2));
-    }
-
-    /// Closed, every face wound counter-clockwise seen from outside (as the renderer's front
-    /// faces), every vertex at the radius.
-    fn assert_closed_and_outward(mesh: &TriMesh, centre: &Point3<f64>, radius: f64) {
-        let mut edges = std::collections::HashMap::new();
-        for t in &mesh.triangles {
-            for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
-                *edges.entry((a.min(b), a.max(b))).or_insert(0) += 1;
-            }
-            let [a, b, c] = t.map(|i| mesh.positions[i as usize].cast::<f64>());
-            let normal = (b - a).cross(&(c - a));
-            let outward = Point3::from((a.coords + b.coords + c.coords) / 3.0) - centre;
-            assert!(normal.dot(&outward) > 0.0, "{t:?} faces inwards");
-        }
-        assert!(edges.values().all(|&n| n == 2));
-        for p in &mesh.positions {
-            assert!(((p.cast::<f64>() - centre).norm() - radius).abs() < 1e-5);
-        }
-    }
-
-    #[test]
-    fn point_markers_are_closed_and_face_outwards() {
-        let centre = Point3::new(0.5, -1.0, 2.0);
-        let mut octahedron = TriMesh::default();
-        add_octahedron(&mut octahedron, &centre, 0.25, 9);
-        assert_closed_and_outward(&octahedron, &centre, 0.25);
-        let mut tetrahedron = TriMesh::default();
-        add_tetrahedron(&mut tetrahedron, &centre, 0.25, 9);
-        assert_eq!(tetrahedron.triangles.len(), 4);
-        assert_closed_and_outward(&tetrahedron, &centre, 0.25);
-        assert!(tetrahedron.uvs.iter().all(|uv| *uv == palette_uv(9)));
+        let mut distinct = uvs.clone();
+        distinct.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        distinct.dedup();
+        assert_eq!(distinct.len(), uvs.len());
+        // Entries past the texture wrap around.
+        assert_eq!(palette_uv(PALETTE_SIDE * PALETTE_SIDE + 5), palette_uv(5));
     }
 }
