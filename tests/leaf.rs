@@ -352,3 +352,72 @@ fn the_user_picks_the_generic_leaf() {
         assert!(stderr.contains(message), "{pick}: {stderr}");
     }
 }
+
+/// The README's "Reconstruction output" section (up to the next top-level bullet).
+fn readme_output_section() -> String {
+    let readme =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap();
+    let start = readme
+        .find("- **Reconstruction output**")
+        .expect("README has a Reconstruction output section");
+    let rest = &readme[start..];
+    let end = rest[2..].find("\n- **").map_or(rest.len(), |e| e + 2);
+    rest[..end].to_owned()
+}
+
+/// Keys of a JSON object (and of the first element of the arrays named in `nested`).
+fn keys(value: &Value, nested: &[&str]) -> Vec<String> {
+    let object = value.as_object().unwrap();
+    let mut keys: Vec<String> = object.keys().cloned().collect();
+    for name in nested {
+        if let Some(first) = object[*name].as_array().and_then(|a| a.first()) {
+            keys.extend(first.as_object().unwrap().keys().cloned());
+        }
+    }
+    keys
+}
+
+#[test]
+fn the_readme_names_every_field_the_outputs_hold() {
+    let out = reconstruction();
+    let section = readme_output_section();
+    let mut missing = Vec::new();
+    let mut check = |file: &str, names: Vec<String>| {
+        for name in names {
+            if !section.contains(&format!("`{name}`")) {
+                missing.push(format!("{file}: {name}"));
+            }
+        }
+    };
+    let segments = read_json(&out.join("segments.json"));
+    check("segments.json", keys(&segments, &["segments"]));
+    check("segments.json edits", keys(&segments["edits"], &[]));
+    let skeleton = read_json(&out.join("skeleton.json"));
+    check("skeleton.json", keys(&skeleton, &["branches"]));
+    let report = read_json(&out.join("report.json"));
+    check("report.json", keys(&report, &[]));
+    check("report.json preparation", keys(&report["preparation"], &[]));
+    let ply = frond::scene::ply::read_ply(&out.join("segmentation.ply")).unwrap();
+    let columns: Vec<String> = ply
+        .element("vertex")
+        .unwrap()
+        .columns
+        .iter()
+        .map(|c| c.name.clone())
+        .collect();
+    check("segmentation.ply", columns);
+    assert!(missing.is_empty(), "the README does not name: {missing:#?}");
+    // And the versions it states are the ones written.
+    assert!(section.contains(&format!(
+        "`format` \"frond segments\", `version` {}",
+        segments["version"]
+    )));
+    assert!(section.contains(&format!(
+        "`format` \"frond skeleton\", `version` {}",
+        skeleton["version"]
+    )));
+    assert!(section.contains(&format!(
+        "`format` \"frond report\", `version` {}",
+        report["version"]
+    )));
+}
