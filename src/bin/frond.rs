@@ -901,78 +901,21 @@ fn read_grey(path: &Path) -> Result<image::GrayImage> {
         .to_luma8())
 }
 
-/// Built-in source plant `index` of a scene seeded `seed`: broadleaf and medium synthetic
-/// plants in turn (name, model with 64² leaf textures).
-fn built_in_plant(seed: u64, index: usize) -> (String, frond::model::PlantModel) {
-    let preset = if index.is_multiple_of(2) {
-        Preset::Broadleaf
-    } else {
-        Preset::Medium
-    };
-    let plant_seed = seed.wrapping_mul(1000).wrapping_add(index as u64);
-    let plant = frond::synth::generate_plant(preset, plant_seed);
-    (
-        format!("{}_{plant_seed}", preset.name()),
-        frond::synth::plant_model(&plant, 64),
-    )
-}
-
 fn scene_command(
     out: &Path,
     plants: &[PathBuf],
     variants: usize,
     options: &frond::ecosystem::SceneOptions,
 ) -> Result<()> {
-    use frond::ecosystem::{SourcePlant, build_scene};
-    use frond::lod::asset::PlantAsset;
-    let progress = BarProgress::new();
-    let sources: Vec<SourcePlant> = if plants.is_empty() {
-        if variants == 0 {
-            bail!("--variants must be at least 1 when no --plant is given");
-        }
-        progress.stage("generating plants", variants as u64);
-        (0..variants)
-            .map(|i| {
-                let (name, model) = built_in_plant(options.seed, i);
-                progress.advance(1);
-                SourcePlant {
-                    name,
-                    asset: PlantAsset::from_model(&model),
-                }
-            })
-            .collect()
+    use frond::ecosystem::folder::{PlantSources, write_scene_folder};
+    let sources = if plants.is_empty() {
+        PlantSources::BuiltIn(variants)
     } else {
-        plants
-            .iter()
-            .map(|path| {
-                Ok(SourcePlant {
-                    name: path.display().to_string(),
-                    asset: PlantAsset::read_glb(path)
-                        .with_context(|| format!("reading {}", path.display()))?,
-                })
-            })
-            .collect::<Result<_>>()?
+        PlantSources::Files(plants.to_vec())
     };
-    progress.stage("placing plants", 0);
-    let (scene, master_sources) = build_scene(&sources, options).context("building the scene")?;
-    let staged = frond::util::atomic::StagedDir::new(out)
-        .with_context(|| format!("creating {}", out.display()))?;
-    std::fs::create_dir_all(staged.path().join("plants"))?;
-    for (plant, &source) in scene.plants.iter().zip(&master_sources) {
-        let path = staged.path().join(&plant.file);
-        let bytes = match plants.get(source) {
-            Some(original) => std::fs::read(original)
-                .with_context(|| format!("reading {}", original.display()))?,
-            None => built_in_plant(options.seed, source).1.to_glb(),
-        };
-        frond::util::atomic::write_atomic(&path, &bytes)
-            .with_context(|| format!("writing {}", path.display()))?;
-    }
-    let scene_path = staged.path().join("scene.json");
-    frond::util::atomic::write_atomic(&scene_path, serde_json::to_string(&scene)?.as_bytes())?;
-    staged
-        .commit()
-        .with_context(|| format!("moving the scene into {}", out.display()))?;
+    let progress = BarProgress::new();
+    let scene = write_scene_folder(out, &sources, options, &progress)
+        .with_context(|| format!("writing the scene {}", out.display()))?;
     progress.bar.finish_and_clear();
     let q = &scene.quantization;
     println!(

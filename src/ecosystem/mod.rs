@@ -5,6 +5,7 @@
 //! renders it with LOD selection, frustum culling and instanced draws.
 
 pub mod flythrough;
+pub mod folder;
 pub mod placement;
 pub mod quantize;
 pub mod terrain;
