@@ -16,6 +16,7 @@
 pub mod files;
 pub mod image_view;
 pub mod jobs;
+pub mod native;
 pub mod tools;
 pub mod view3d;
 pub mod workspace;
@@ -177,6 +178,10 @@ pub struct FrondApp {
     /// Fit the leaves as soon as the scene is open (`frond-ui --fit-leaves`).
     pub fit_leaves_when_open: bool,
     title: String,
+    /// Use the platform's file dialogs (when one is available; see `native`).
+    native_dialogs: bool,
+    /// The native dialog being shown.
+    native: Option<native::NativeDialog>,
 }
 
 fn file_status_text(status: &ImageFileStatus) -> String {
@@ -204,7 +209,9 @@ fn open_dialog(folder: PathBuf) -> Dialog {
 impl FrondApp {
     /// A new window with the user's configuration folder; starts opening `initial` when given.
     pub fn new(initial: Option<PathBuf>) -> Self {
-        Self::with_config(initial, ConfigDir::from_env())
+        let mut app = Self::with_config(initial, ConfigDir::from_env());
+        app.native_dialogs = native::available();
+        app
     }
 
     /// A new window keeping recent files and autosaves in `config`.
@@ -237,6 +244,8 @@ impl FrondApp {
             benchmark: None,
             fit_leaves_when_open: false,
             title: String::new(),
+            native_dialogs: false,
+            native: None,
         };
         if let Some(path) = initial {
             app.open(path);
@@ -460,7 +469,7 @@ impl FrondApp {
     pub fn save(&mut self) {
         match self.workspace.as_ref().map(|w| w.project_path.clone()) {
             Some(Some(path)) => self.save_as(path),
-            Some(None) => self.dialog = Some(self.save_as_dialog()),
+            Some(None) => self.show_save_as_dialog(),
             None => {}
         }
     }
@@ -610,7 +619,7 @@ impl FrondApp {
             self.undo();
         }
         if pressed(shortcut(shift_command, Key::S)) {
-            self.dialog = Some(self.save_as_dialog());
+            self.show_save_as_dialog();
         } else if pressed(shortcut(command, Key::S)) {
             self.save();
         }
@@ -661,14 +670,73 @@ impl FrondApp {
         }
     }
 
-    fn show_open_dialog(&mut self) {
-        let folder = self
-            .workspace
+    fn open_folder(&self) -> PathBuf {
+        self.workspace
             .as_ref()
             .and_then(|w| w.input.parent().map(Path::to_path_buf))
             .or_else(|| std::env::current_dir().ok())
-            .unwrap_or_else(|| PathBuf::from("/"));
-        self.dialog = Some(open_dialog(folder));
+            .unwrap_or_else(|| PathBuf::from("/"))
+    }
+
+    /// The platform's dialog for `pick` when there is one (and none is showing); false when
+    /// the built-in dialog should be shown instead.
+    fn show_native(&mut self, pick: native::Pick, start: &Path) -> bool {
+        if !self.native_dialogs {
+            return false;
+        }
+        if self.native.is_none() {
+            self.native = Some(native::NativeDialog::show(pick, start));
+        }
+        true
+    }
+
+    /// Acts on the native dialog's answer once it comes.
+    fn poll_native(&mut self, ctx: &egui::Context) {
+        let Some(dialog) = &self.native else {
+            return;
+        };
+        let Some(answer) = dialog.poll() else {
+            ctx.request_repaint_after(std::time::Duration::from_millis(100));
+            return;
+        };
+        let pick = dialog.pick;
+        self.native = None;
+        let Some(path) = answer else {
+            return;
+        };
+        match pick {
+            native::Pick::OpenFolder | native::Pick::OpenProject => self.open(path),
+            native::Pick::SaveProject => {
+                let mut file = path;
+                if file.extension().is_none_or(|e| e != "frond") {
+                    file.set_extension("frond");
+                }
+                self.save_as(file);
+            }
+            native::Pick::ExportFolder => self.export(path),
+        }
+    }
+
+    fn show_open_dialog(&mut self) {
+        let folder = self.open_folder();
+        if !self.show_native(native::Pick::OpenFolder, &folder) {
+            self.show_builtin_open_dialog();
+        }
+    }
+
+    /// The built-in browser (photos, COLMAP folders and project files alike).
+    fn show_builtin_open_dialog(&mut self) {
+        self.dialog = Some(open_dialog(self.open_folder()));
+    }
+
+    fn show_save_as_dialog(&mut self) {
+        let dialog = self.save_as_dialog();
+        if let Dialog::SaveAs { path } = &dialog
+            && self.show_native(native::Pick::SaveProject, Path::new(path))
+        {
+            return;
+        }
+        self.dialog = Some(dialog);
     }
 
     fn show_export_dialog(&mut self) {
@@ -680,7 +748,13 @@ impl FrondApp {
                 .display()
                 .to_string()
         });
-        self.dialog = Some(Dialog::Export { path });
+        let start = Path::new(&path)
+            .parent()
+            .unwrap_or(Path::new("."))
+            .to_path_buf();
+        if !self.show_native(native::Pick::ExportFolder, &start) {
+            self.dialog = Some(Dialog::Export { path });
+        }
     }
 
     /// Draws the whole window.
@@ -689,6 +763,7 @@ impl FrondApp {
         let ctx = ui.ctx().clone();
         self.confirm_close(&ctx);
         self.poll_job(&ctx);
+        self.poll_native(&ctx);
         self.shortcuts(&ctx);
         self.autosave_tick();
         self.update_title(&ctx);
@@ -955,6 +1030,15 @@ impl FrondApp {
                 {
                     self.show_open_dialog();
                 }
+                if self.native_dialogs {
+                    if ui.button("Open project…").clicked() {
+                        let folder = self.open_folder();
+                        self.show_native(native::Pick::OpenProject, &folder);
+                    }
+                    if ui.button("Open with the built-in browser…").clicked() {
+                        self.show_builtin_open_dialog();
+                    }
+                }
                 ui.menu_button("Open recent", |ui| {
                     if self.recent.is_empty() {
                         ui.label("No recent files");
@@ -980,7 +1064,7 @@ impl FrondApp {
                     )
                     .clicked()
                 {
-                    self.dialog = Some(self.save_as_dialog());
+                    self.show_save_as_dialog();
                 }
                 if ui
                     .add_enabled(
@@ -1360,7 +1444,7 @@ impl FrondApp {
                     ui.label(&status.text);
                 }
             } else if self.workspace.is_none() {
-                ui.label("Open a COLMAP folder (images/ + sparse/0, dense/0 or a model folder) or a .frond project.");
+                ui.label("Open a folder of photos, a COLMAP folder (images/ + sparse/0, dense/0 or a model folder) or a .frond project.");
             }
             ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {
                 if self.show_frame_time {
@@ -1471,7 +1555,10 @@ impl FrondApp {
             ui.heading("Frond");
             ui.label("Image-based plant modeling: from photos of a plant to an editable 3D model.");
             ui.add_space(12.0);
-            if ui.button("📂  Open a COLMAP folder or project…").clicked() {
+            if ui
+                .button("📂  Open photos, a COLMAP folder or a project…")
+                .clicked()
+            {
                 self.show_open_dialog();
             }
             if !self.recent.is_empty() {
