@@ -30,6 +30,28 @@ pub struct SegmentSamples {
 pub const PRESMOOTH_SIGMA_PX: f64 = 0.8;
 
 impl GradientImage {
+    /// Grey levels for display, row-major: the gradient scaled so that its 99th percentile
+    /// (rank rounded down, finite values only) is white.
+    pub fn to_grey(&self) -> Vec<u8> {
+        let mut sorted: Vec<f32> = self
+            .data
+            .iter()
+            .copied()
+            .filter(|v| v.is_finite())
+            .collect();
+        let scale = if sorted.is_empty() {
+            1.0
+        } else {
+            let k = (sorted.len() - 1) * 99 / 100;
+            let (_, high, _) = sorted.select_nth_unstable_by(k, f32::total_cmp);
+            high.max(1e-6)
+        };
+        self.data
+            .iter()
+            .map(|v| ((v / scale).clamp(0.0, 1.0) * 255.0) as u8)
+            .collect()
+    }
+
     /// Computes the gradient image of an 8-bit BGR image.
     pub fn from_bgr(mat: &Mat) -> opencv::Result<Self> {
         let mut smoothed = Mat::default();
@@ -122,6 +144,28 @@ impl GradientImage {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn display_grey_puts_the_99th_percentile_at_white() {
+        let image = GradientImage {
+            width: 100,
+            height: 2,
+            data: (0..200).map(|i| i as f32).chain([]).collect(),
+        };
+        let grey = image.to_grey();
+        // Rank (199 × 99) / 100 = 197: value 197 and above are white, half of it mid-grey.
+        assert_eq!(grey[197], 255);
+        assert_eq!(grey[199], 255);
+        assert!(grey[196] < 255);
+        assert_eq!(grey[98], (98.0f32 / 197.0 * 255.0) as u8);
+        assert_eq!(grey[0], 0);
+        let flat = GradientImage {
+            width: 1,
+            height: 1,
+            data: vec![f32::NAN],
+        };
+        assert_eq!(flat.to_grey(), vec![0]);
+    }
     use opencv::core::{CV_8UC3, Rect, Scalar};
 
     fn two_tone(width: i32, height: i32, split_x: i32) -> Mat {

@@ -147,26 +147,10 @@ fn gradient_image(scene: &Scene, view: usize) -> Result<ColorImage, String> {
     let image = &scene.reconstruction.images()[view];
     let gradient = frond::graph::gradient::GradientImage::for_image(scene, image)
         .map_err(|e| e.to_string())?;
-    let mut sorted: Vec<f32> = gradient
-        .data
-        .iter()
-        .copied()
-        .filter(|v| v.is_finite())
-        .collect();
-    let scale = if sorted.is_empty() {
-        1.0
-    } else {
-        let k = (sorted.len() - 1) * 99 / 100;
-        let (_, high, _) = sorted.select_nth_unstable_by(k, f32::total_cmp);
-        high.max(1e-6)
-    };
-    let grey = gradient
-        .data
-        .iter()
-        .map(|v| ((v / scale).clamp(0.0, 1.0) * 255.0) as u8);
+    let grey = gradient.to_grey();
     Ok(ColorImage::from_gray_iter(
         [gradient.width as usize, gradient.height as usize],
-        grey,
+        grey.into_iter(),
     ))
 }
 
