@@ -140,7 +140,7 @@ impl PointGraph {
         let pairs = knn_pairs(points, options.knn);
         let use_images = options.alpha > 0.0;
         let normals = estimate_normals(points, 10);
-        let depth_maps = use_images.then(|| visibility::DepthMaps::build(points, views, 2.0));
+        let depth_maps = use_images.then(|| visibility::SplatDepthMaps::build(points, views, 2.0));
         // Per edge: (a, b, d3D, d2D, Σg², #g) over the gradient samples of all common views.
         type Measured = Option<(u32, u32, f32, f32, f64, usize)>;
         let measured: Vec<Measured> = pairs
