@@ -11,7 +11,7 @@ use super::command::{BranchStroke, BranchTarget, Command, PixelRef, ViewCamera};
 use super::stroke::{Side, Stroke};
 use crate::branch::skeleton::SkeletonStats;
 use crate::branch::{BranchPoint, BranchTree};
-use crate::graph::maxflow::{MaxFlow, MaxFlowError, Segment as CutSide};
+use crate::graph::maxflow::{CutSide, MaxFlow, MaxFlowError};
 use crate::pipeline::{EditCount, PlantState, SkeletonRun};
 use crate::scene::{ImageId, Scene};
 use crate::segment::boundary::{Boundary, BoundaryError, BoundaryOptions};
@@ -676,7 +676,7 @@ impl Session {
         let inside: Vec<u32> = members
             .iter()
             .enumerate()
-            .filter(|(i, _)| flow.segment(*i) == CutSide::Source)
+            .filter(|(i, _)| flow.side(*i) == CutSide::Source)
             .map(|(_, &p)| p)
             .collect();
         if inside.is_empty() || inside.len() == members.len() {
