@@ -7,7 +7,7 @@ use std::sync::Arc;
 use nalgebra::Point2;
 
 use super::branches::{self, BranchEditError, SnapPoints, StrokeView};
-use super::command::{BranchStroke, BranchTarget, Command, PixelRef, ViewCamera};
+use super::command::{BranchStroke, BranchTarget, Command, PixelRef, ViewCameraRecord};
 use super::stroke::{Side, Stroke};
 use crate::branch::skeleton::SkeletonStats;
 use crate::branch::{BranchPoint, BranchTree};
@@ -173,7 +173,7 @@ impl Session {
     /// The branch under a pixel of the 3D panel's view (its camera as the command carries it).
     pub fn pick_branch_in_view(
         &self,
-        camera: &ViewCamera,
+        camera: &ViewCameraRecord,
         pixel: [f64; 2],
     ) -> Result<BranchPoint, EditError> {
         let view = StrokeView::from_view_camera(camera)?;

@@ -20,7 +20,7 @@ use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaterni
 use crate::image_view::{Action, segment_color};
 use crate::tools::Tool;
 use crate::workspace::Workspace;
-use frond::edit::{BranchEnd, BranchStroke, BranchTarget, Command, ViewCamera as EditCamera};
+use frond::edit::{BranchEnd, BranchStroke, BranchTarget, Command, ViewCameraRecord as EditCamera};
 
 /// Side of the palette texture: colour `k` is texel `(k mod side, k div side)`.
 const PALETTE_SIDE: u32 = 64;
