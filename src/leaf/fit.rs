@@ -9,6 +9,7 @@ use serde::Serialize;
 use super::template::LeafTemplate;
 use crate::graph::shape::Shape;
 use crate::mesh::TriMesh;
+use crate::util::geometry::cubic_monomials;
 use crate::util::polygon::{inside_polygon, polygon_area};
 use crate::util::stats::quantile;
 
@@ -123,24 +124,6 @@ pub struct HeightField {
     max: f64,
 }
 
-fn monomials(u: f64, v: f64, terms: usize) -> [f64; 10] {
-    let all = [
-        1.0,
-        u,
-        v,
-        u * u,
-        u * v,
-        v * v,
-        u * u * u,
-        u * u * v,
-        u * v * v,
-        v * v * v,
-    ];
-    let mut out = [0.0; 10];
-    out[..terms].copy_from_slice(&all[..terms]);
-    out
-}
-
 impl HeightField {
     pub fn flat() -> Self {
         Self {
@@ -168,7 +151,7 @@ impl HeightField {
             let mut a = nalgebra::DMatrix::<f64>::zeros(terms, terms);
             let mut b = nalgebra::DVector::<f64>::zeros(terms);
             for ((q, h), w) in samples.iter().zip(&weights) {
-                let m = monomials(q.x / scale, q.y / scale, terms);
+                let m = cubic_monomials(q.x / scale, q.y / scale);
                 for i in 0..terms {
                     b[i] += w * m[i] * h;
                     for j in 0..terms {
@@ -187,7 +170,7 @@ impl HeightField {
             let residuals: Vec<f64> = samples
                 .iter()
                 .map(|(q, h)| {
-                    let m = monomials(q.x / scale, q.y / scale, terms);
+                    let m = cubic_monomials(q.x / scale, q.y / scale);
                     h - (0..terms).map(|i| coefficients[i] * m[i]).sum::<f64>()
                 })
                 .collect();
@@ -216,7 +199,7 @@ impl HeightField {
 
     pub fn at(&self, q: &Point2<f64>) -> f64 {
         let terms = self.coefficients.len();
-        let m = monomials(q.x / self.scale, q.y / self.scale, terms);
+        let m = cubic_monomials(q.x / self.scale, q.y / self.scale);
         let h: f64 = (0..terms).map(|i| self.coefficients[i] * m[i]).sum();
         h.clamp(self.min.min(0.0), self.max.max(0.0))
     }
