@@ -75,6 +75,26 @@ impl LeafFrame {
     pub fn to_world(&self, q: &Point2<f64>, height: f64) -> Point3<f64> {
         self.origin + self.x_axis * q.x + self.y_axis * q.y + self.normal * height
     }
+
+    /// Where the viewing ray through `uv_image` meets the leaf plane, in plane coordinates;
+    /// `None` behind the camera, or where the ray grazes the plane (|cos| under 0.15).
+    pub fn back_project(
+        &self,
+        uv_image: &Point2<f64>,
+        camera: &crate::scene::Camera,
+        camera_from_world: &nalgebra::Isometry3<f64>,
+    ) -> Option<Point2<f64>> {
+        let ray_camera = camera.unproject(uv_image)?;
+        let world_from_camera = camera_from_world.inverse();
+        let origin = world_from_camera * Point3::origin();
+        let direction = (world_from_camera.rotation * ray_camera).normalize();
+        let denominator = direction.dot(&self.normal);
+        if denominator.abs() < 0.15 {
+            return None;
+        }
+        let t = (self.origin - origin).dot(&self.normal) / denominator;
+        (t > 0.0).then(|| self.to_plane(&(origin + direction * t)).0)
+    }
 }
 
 /// Where the plant is, for the orientation of leaves: they face up and away from what they
@@ -417,17 +437,9 @@ fn back_project(
     view: &BoundaryView<'_>,
     frame: &LeafFrame,
 ) -> Option<Point2<f64>> {
-    let ray_camera = view.camera.unproject(pixel)?;
-    let world_from_camera = view.camera_from_world.inverse();
-    let origin = world_from_camera * Point3::origin();
-    let direction = (world_from_camera.rotation * ray_camera).normalize();
-    let denominator = direction.dot(&frame.normal);
-    if denominator.abs() < 0.15 {
-        return None;
-    }
-    let t = (frame.origin - origin).dot(&frame.normal) / denominator;
-    let q = frame.to_plane(&(origin + direction * t)).0;
-    (t > 0.0 && q.x.is_finite() && q.y.is_finite()).then_some(q)
+    frame
+        .back_project(pixel, view.camera, &view.camera_from_world)
+        .filter(|q| q.x.is_finite() && q.y.is_finite())
 }
 
 /// Texels per side for a leaf's texture: about one texel per photo pixel along the leaf's
