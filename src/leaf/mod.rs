@@ -305,15 +305,14 @@ pub fn extract_template(
         * 2.0;
     let heights = fit::HeightField::fit(&samples, length_guess);
     let key = (source.segment, source.view);
-    if !boundaries.contains_key(&key) {
-        let computed = input.views.boundary(
+    if let std::collections::btree_map::Entry::Vacant(slot) = boundaries.entry(key) {
+        slot.insert(input.views.boundary(
             input.scene,
             input.points,
             &input.labels.segment_of,
             source.segment,
             source.view,
-        )?;
-        boundaries.insert(key, computed);
+        )?);
     }
     let polygon = boundaries[&key].polygon.clone();
     let image = &input.scene.reconstruction.images()[source.view];
