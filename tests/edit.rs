@@ -550,7 +550,7 @@ fn killed_save_leaves_the_previous_project_intact() {
 // ---- Branch edits (seed 004 §7) ----
 
 use frond::branch::BranchTree;
-use frond::edit::{BranchEnd, BranchStroke, BranchTarget, ViewCamera};
+use frond::edit::{BranchEnd, BranchStroke, BranchTarget, ViewCameraRecord};
 use frond::eval::SkeletonRecord;
 use nalgebra::Point3;
 
@@ -656,21 +656,16 @@ fn stem_and_petiole() -> (&'static SkeletonRecord, &'static SkeletonRecord) {
 }
 
 /// The 3D panel's camera placed at a photo (the synthetic photos are centred pinholes).
-fn view_camera_of_photo(session: &Session, view: usize) -> ViewCamera {
+fn view_camera_of_photo(session: &Session, view: usize) -> ViewCameraRecord {
     let image = &session.scene().reconstruction.images()[view];
     let camera = session.scene().reconstruction.camera_of(image);
-    let (fx, _, cx, cy) = camera.focal_and_principal_point();
+    let (fx, fy, cx, cy) = camera.focal_and_principal_point();
+    assert_eq!(fx, fy);
     assert!((cx - 0.5 * camera.width as f64).abs() < 1e-9);
     assert!((cy - 0.5 * camera.height as f64).abs() < 1e-9);
-    let q = image.camera_from_world.rotation.quaternion();
-    let t = image.camera_from_world.translation.vector;
-    ViewCamera {
-        rotation: [q.w, q.i, q.j, q.k],
-        translation: [t.x, t.y, t.z],
-        focal_px: fx,
-        width: camera.width,
-        height: camera.height,
-    }
+    let view = frond::render::ViewCamera::from_colmap(camera, &image.camera_from_world, 0.01, 10.0)
+        .expect("a pinhole photo");
+    ViewCameraRecord::from_view(&view)
 }
 
 #[test]
@@ -1047,7 +1042,7 @@ fn bad_branch_edits_are_refused_without_changes() {
         },
         Command::DrawBranch {
             stroke: BranchStroke::View {
-                camera: ViewCamera {
+                camera: ViewCameraRecord {
                     rotation: [0.0; 4],
                     translation: [0.0; 3],
                     focal_px: 100.0,

@@ -1,7 +1,7 @@
 //! Boykov–Kolmogorov against petgraph's Dinic on random graphs: same flow value, and the
 //! cut it reports has exactly that capacity.
 
-use frond::graph::maxflow::{MaxFlow, Segment};
+use frond::graph::maxflow::{CutSide, MaxFlow};
 use frond::util::rng::Rng;
 use petgraph::Graph;
 use petgraph::algo::dinics;
@@ -48,7 +48,7 @@ fn same_flow_as_dinics_and_a_valid_cut() {
             (value - expected).abs() < 1e-9 * expected.max(1.0),
             "seed {seed}: {value} vs {expected}"
         );
-        let on_source = |v: usize| v == n || (v < n && flow.segment(v) == Segment::Source);
+        let on_source = |v: usize| v == n || (v < n && flow.side(v) == CutSide::Source);
         let cut: f64 = edges
             .iter()
             .filter(|(a, b, _)| on_source(*a) && !on_source(*b))

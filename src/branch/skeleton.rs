@@ -17,13 +17,12 @@
 
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap};
-use std::num::NonZero;
 
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Point3, Vector3};
 use serde::Serialize;
 
 use super::{Branch, BranchTree, GeneralizedCylinder, Spline};
+use crate::graph::neighbours::Neighbours;
 use crate::graph::shape::Shape;
 use crate::util::union_find::UnionFind;
 
@@ -116,24 +115,18 @@ pub fn automatic_skeleton(
         points: n,
         ..SkeletonStats::default()
     };
-    let coords: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
-    let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&coords)
-        .map_err(|_| SkeletonError::TooFewPoints(n))?;
-    let wanted = NonZero::new((k + 1).min(n)).unwrap_or(NonZero::<usize>::MIN);
+    let neighbours =
+        Neighbours::new(points.iter().copied()).map_err(|_| SkeletonError::TooFewPoints(n))?;
     let mut edges: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
     let mut nearest = Vec::with_capacity(n);
-    for (i, c) in coords.iter().enumerate() {
-        let found = tree
-            .query(c)
-            .nearest_n::<SquaredEuclidean<f64>>(wanted)
-            .execute();
+    for i in 0..n {
         let mut first = f64::INFINITY;
-        for f in found {
-            let j = f.item as usize;
+        for found in neighbours.around(i, k) {
+            let j = found.index;
             if j == i {
                 continue;
             }
-            let d = f.distance.sqrt();
+            let d = found.distance();
             first = first.min(d);
             edges[i].push((j, d));
             edges[j].push((i, d));
@@ -209,23 +202,18 @@ pub fn automatic_skeleton(
     let max_gap = options.max_gap * spacing;
     loop {
         let inside: Vec<usize> = (0..n).filter(|&i| connected[i]).collect();
-        let inside_coords: Vec<[f64; 3]> = inside.iter().map(|&i| coords[i]).collect();
-        let Ok(inside_tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&inside_coords) else {
+        let Ok(inside_neighbours) = Neighbours::new(inside.iter().map(|&i| points[i])) else {
             break;
         };
         let mut best: Option<(f64, usize, usize, usize)> = None;
         for (slot, &g) in pending.iter().enumerate() {
             for &i in &groups[g] {
-                let found = inside_tree
-                    .query(&coords[i])
-                    .nearest_n::<SquaredEuclidean<f64>>(NonZero::<usize>::MIN)
-                    .execute();
-                let Some(found) = found.first() else {
+                let Some(found) = inside_neighbours.nearest(&points[i]) else {
                     continue;
                 };
-                let d = found.distance.sqrt();
+                let d = found.distance();
                 if d <= max_gap && best.is_none_or(|b| d < b.0) {
-                    best = Some((d, slot, i, inside[found.item as usize]));
+                    best = Some((d, slot, i, inside[found.index]));
                 }
             }
         }
@@ -373,7 +361,7 @@ pub fn automatic_skeleton(
                 &BaseContext {
                     nodes: &nodes,
                     points,
-                    tree: &tree,
+                    neighbours: &neighbours,
                     branches: &branches,
                     level_width,
                 },
@@ -443,7 +431,7 @@ pub fn automatic_skeleton(
             points,
             edges: &edges,
             distance: &distance,
-            tree: &tree,
+            neighbours: &neighbours,
             level_width,
             min_points: options.min_component_points,
             min_length,
@@ -460,7 +448,8 @@ struct TubeContext<'a> {
     edges: &'a [Vec<(usize, f64)>],
     /// Geodesic distance from the root (infinite where not reached).
     distance: &'a [f64],
-    tree: &'a ImmutableKdTree<f64, 3>,
+    /// The points' neighbours.
+    neighbours: &'a Neighbours,
     level_width: f64,
     min_points: usize,
     min_length: f64,
@@ -485,7 +474,7 @@ fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> us
         points,
         edges,
         distance,
-        tree,
+        neighbours,
         level_width,
         min_points,
         min_length,
@@ -509,8 +498,7 @@ fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> us
             samples.push(([p.x, p.y, p.z], cylinder.radius_at(fraction)));
         }
     }
-    let coords: Vec<[f64; 3]> = samples.iter().map(|s| s.0).collect();
-    let Ok(axis_tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&coords) else {
+    let Ok(axis_neighbours) = Neighbours::new(samples.iter().map(|s| Point3::from(s.0))) else {
         return 0;
     };
     let unexplained: Vec<bool> = points
@@ -520,13 +508,9 @@ fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> us
             if !distance[i].is_finite() {
                 return false;
             }
-            let found = axis_tree
-                .query(&[p.x, p.y, p.z])
-                .nearest_n::<SquaredEuclidean<f64>>(NonZero::<usize>::MIN)
-                .execute();
-            found
-                .first()
-                .is_some_and(|f| f.distance.sqrt() > samples[f.item as usize].1 + level_width)
+            axis_neighbours
+                .nearest(p)
+                .is_some_and(|f| f.distance() > samples[f.index].1 + level_width)
         })
         .collect();
     let mut groups = UnionFind::new(points.len());
@@ -623,7 +607,7 @@ fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> us
         let parent_radius = branches[parent as usize].cylinder.radius_at(fraction);
         let extension = [anchor, origin];
         let supported = support(
-            tree,
+            neighbours,
             &extension,
             1.5 * parent_radius,
             0.5 * level_width,
@@ -808,7 +792,7 @@ fn reanchor_base(
     let BaseContext {
         nodes,
         points,
-        tree,
+        neighbours,
         branches,
         level_width,
     } = *context;
@@ -906,9 +890,10 @@ fn reanchor_base(
     let tolerance = reference + 0.5 * level_width;
     let step = 0.5 * level_width;
     let new_base = [anchor.point, origin];
-    let new_support = support(tree, &new_base, 1.5 * parent_radius, step, tolerance)?;
+    let new_support = support(neighbours, &new_base, 1.5 * parent_radius, step, tolerance)?;
     let old_base = &path[..=first_clean + offset];
-    let old_support = support(tree, old_base, 1.5 * parent_radius, step, tolerance).unwrap_or(0.0);
+    let old_support =
+        support(neighbours, old_base, 1.5 * parent_radius, step, tolerance).unwrap_or(0.0);
     (new_support >= 0.8 && new_support + 0.05 >= old_support).then_some(anchor)
 }
 
@@ -985,7 +970,8 @@ fn sibling_of(
 struct BaseContext<'a> {
     nodes: &'a [Node],
     points: &'a [Point3<f64>],
-    tree: &'a ImmutableKdTree<f64, 3>,
+    /// The points' neighbours.
+    neighbours: &'a Neighbours,
     branches: &'a [Branch],
     level_width: f64,
 }
@@ -993,7 +979,7 @@ struct BaseContext<'a> {
 /// Fraction of samples (every `step` along `line`, those within `skip` of its start left
 /// out: inside the parent) that have a point within `tolerance`; `None` without samples.
 fn support(
-    tree: &ImmutableKdTree<f64, 3>,
+    neighbours: &Neighbours,
     line: &[Point3<f64>],
     skip: f64,
     step: f64,
@@ -1010,13 +996,9 @@ fn support(
                 continue;
             }
             total += 1;
-            let found = tree
-                .query(&[p.x, p.y, p.z])
-                .nearest_n::<SquaredEuclidean<f64>>(NonZero::<usize>::MIN)
-                .execute();
-            if found
-                .first()
-                .is_some_and(|f| f.distance.sqrt() <= tolerance)
+            if neighbours
+                .nearest(&p)
+                .is_some_and(|f| f.distance() <= tolerance)
             {
                 supported += 1;
             }
@@ -1342,15 +1324,14 @@ mod tests {
             .copied()
             .unwrap();
         let distance: Vec<f64> = points.iter().map(|p| (p - root).norm()).collect();
-        let coords: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
-        let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&coords).unwrap();
+        let neighbours = Neighbours::new(points.iter().copied()).unwrap();
         recover_missed_tubes(
             branches,
             &TubeContext {
                 points,
                 edges: &edges,
                 distance: &distance,
-                tree: &tree,
+                neighbours: &neighbours,
                 level_width,
                 min_points: 12,
                 min_length: 3.0 * level_width,

@@ -5,7 +5,7 @@
 
 use nalgebra::{Isometry3, Point2, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
-use super::command::{BranchEnd, ViewCamera};
+use super::command::{BranchEnd, ViewCameraRecord};
 use crate::branch::skeleton::SkeletonError;
 use crate::branch::{Branch, BranchPoint, BranchTree, GeneralizedCylinder, Spline, SplineError};
 use crate::scene::{Camera, CameraModelKind};
@@ -60,7 +60,7 @@ pub struct StrokeView {
 
 impl StrokeView {
     /// The 3D panel's pinhole camera.
-    pub fn from_view_camera(view: &ViewCamera) -> Result<Self, BranchEditError> {
+    pub fn from_view_camera(view: &ViewCameraRecord) -> Result<Self, BranchEditError> {
         let invalid = |m: &str| BranchEditError::InvalidViewCamera(m.to_owned());
         let [w, x, y, z] = view.rotation;
         let quaternion = Quaternion::new(w, x, y, z);
@@ -645,7 +645,7 @@ mod tests {
     /// A pinhole 400 px wide looking down +z from z = −1 at the plane z = 0 (200 px per
     /// unit there).
     fn view() -> StrokeView {
-        StrokeView::from_view_camera(&ViewCamera {
+        StrokeView::from_view_camera(&ViewCameraRecord {
             rotation: [1.0, 0.0, 0.0, 0.0],
             translation: [0.0, 0.0, 1.0],
             focal_px: 200.0,

@@ -2,6 +2,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::branches::{BranchEditError, StrokeView};
+use crate::render::ViewCamera;
 use crate::scene::ImageId;
 use crate::segment::SegmentLabel;
 
@@ -12,10 +14,12 @@ pub struct PixelRef {
     pub pixel: [f64; 2],
 }
 
-/// A pinhole view that is not one of the photos (the 3D panel's camera), with COLMAP's
-/// conventions: x right, y down, z forward; pixel centres at +0.5.
+/// A render [`ViewCamera`] that is not one of the photos (the 3D panel's camera) as a command
+/// records it: square pixels, the principal point at the image centre, no clip planes. COLMAP's
+/// conventions: x right, y down, z forward; pixel centres at +0.5. The fields are the project
+/// file's format.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct ViewCamera {
+pub struct ViewCameraRecord {
     /// Rotation of `camera_from_world` as a unit quaternion `[w, x, y, z]`.
     pub rotation: [f64; 4],
     /// Translation of `camera_from_world`.
@@ -23,6 +27,30 @@ pub struct ViewCamera {
     pub focal_px: f64,
     pub width: u32,
     pub height: u32,
+}
+
+impl ViewCameraRecord {
+    /// The record of a render view: its pose, size and `fx` (the 3D panel's views have
+    /// `fy = fx` and the principal point at the centre; the clip planes are not recorded).
+    pub fn from_view(view: &ViewCamera) -> Self {
+        let q = view.camera_from_world.rotation.quaternion().coords;
+        let t = view.camera_from_world.translation.vector;
+        Self {
+            rotation: [q.w, q.x, q.y, q.z],
+            translation: [t.x, t.y, t.z],
+            focal_px: view.fx,
+            width: view.width,
+            height: view.height,
+        }
+    }
+
+    /// The render view recorded, with clip planes `near` and `far`; an error when the record
+    /// is not a valid pinhole (see [`StrokeView::from_view_camera`]).
+    pub fn to_view(&self, near: f64, far: f64) -> Result<ViewCamera, BranchEditError> {
+        let pinhole = StrokeView::from_view_camera(self)?;
+        ViewCamera::from_colmap(&pinhole.camera, &pinhole.camera_from_world, near, far)
+            .map_err(|e| BranchEditError::InvalidViewCamera(e.to_string()))
+    }
 }
 
 /// A branch drawn by the user: where the stroke was drawn decides how it gets depth.
@@ -36,7 +64,7 @@ pub enum BranchStroke {
     },
     /// Pixels in the 3D panel's view.
     View {
-        camera: ViewCamera,
+        camera: ViewCameraRecord,
         stroke: Vec<[f64; 2]>,
     },
     /// Positions in the world frame (a 3D pen, a script).
@@ -50,7 +78,10 @@ pub enum BranchTarget {
     /// A pixel of a photo; the control point keeps its depth in that view.
     Image { at: PixelRef },
     /// A pixel of the 3D panel's view; the control point keeps its depth in that view.
-    View { camera: ViewCamera, pixel: [f64; 2] },
+    View {
+        camera: ViewCameraRecord,
+        pixel: [f64; 2],
+    },
     /// A position in the world frame.
     World { position: [f64; 3] },
 }
@@ -189,7 +220,7 @@ mod tests {
             Command::AutomaticSkeleton,
             Command::DrawBranch {
                 stroke: BranchStroke::View {
-                    camera: ViewCamera {
+                    camera: ViewCameraRecord {
                         rotation: [1.0, 0.0, 0.0, 0.0],
                         translation: [0.0, 0.0, 2.0],
                         focal_px: 500.0,
@@ -222,5 +253,55 @@ mod tests {
         assert!(text.contains("\"command\":\"split_by_stroke\""), "{text}");
         let back: Vec<Command> = serde_json::from_str(&text).unwrap();
         assert_eq!(back, commands);
+    }
+
+    #[test]
+    fn a_render_view_round_trips_through_its_record() {
+        let camera_from_world = nalgebra::Isometry3::new(
+            nalgebra::Vector3::new(0.1, -0.2, 1.5),
+            nalgebra::Vector3::new(0.3, -1.1, 0.4),
+        );
+        let view = ViewCamera {
+            width: 640,
+            height: 480,
+            fx: 520.0,
+            fy: 520.0,
+            cx: 320.0,
+            cy: 240.0,
+            camera_from_world,
+            near: 0.01,
+            far: 20.0,
+        };
+        let record = ViewCameraRecord::from_view(&view);
+        let back = record.to_view(view.near, view.far).unwrap();
+        assert_eq!((back.width, back.height), (view.width, view.height));
+        assert_eq!(
+            [back.fx, back.fy, back.cx, back.cy],
+            [520.0, 520.0, 320.0, 240.0]
+        );
+        let point_world = nalgebra::Point3::new(0.05, 0.1, -0.3);
+        let (uv, depth) = view.project(&point_world).unwrap();
+        let (uv_back, depth_back) = back.project(&point_world).unwrap();
+        assert!((uv - uv_back).norm() < 1e-9 && (depth - depth_back).abs() < 1e-12);
+        // The record is what the project file holds: a second trip keeps it (up to rounding
+        // in the quaternion's normalisation).
+        let again = ViewCameraRecord::from_view(&back);
+        assert_eq!(
+            (again.translation, again.focal_px, again.width, again.height),
+            (
+                record.translation,
+                record.focal_px,
+                record.width,
+                record.height
+            )
+        );
+        for (a, b) in again.rotation.iter().zip(&record.rotation) {
+            assert!((a - b).abs() < 1e-15, "{again:?} {record:?}");
+        }
+        let invalid = ViewCameraRecord {
+            focal_px: 0.0,
+            ..record
+        };
+        assert!(invalid.to_view(0.01, 20.0).is_err());
     }
 }

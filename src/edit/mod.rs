@@ -13,6 +13,6 @@ pub mod project;
 pub mod session;
 pub mod stroke;
 
-pub use command::{BranchEnd, BranchStroke, BranchTarget, Command, PixelRef, ViewCamera};
+pub use command::{BranchEnd, BranchStroke, BranchTarget, Command, PixelRef, ViewCameraRecord};
 pub use project::{Project, ProjectError, open_project, save_session};
 pub use session::{EditError, SegmentState, Session};

@@ -7,11 +7,11 @@ use std::sync::Arc;
 use nalgebra::Point2;
 
 use super::branches::{self, BranchEditError, SnapPoints, StrokeView};
-use super::command::{BranchStroke, BranchTarget, Command, PixelRef, ViewCamera};
+use super::command::{BranchStroke, BranchTarget, Command, PixelRef, ViewCameraRecord};
 use super::stroke::{Side, Stroke};
 use crate::branch::skeleton::SkeletonStats;
 use crate::branch::{BranchPoint, BranchTree};
-use crate::graph::maxflow::{MaxFlow, MaxFlowError, Segment as CutSide};
+use crate::graph::maxflow::{CutSide, MaxFlow, MaxFlowError};
 use crate::pipeline::{EditCount, PlantState, SkeletonRun};
 use crate::scene::{ImageId, Scene};
 use crate::segment::boundary::{Boundary, BoundaryError, BoundaryOptions};
@@ -173,7 +173,7 @@ impl Session {
     /// The branch under a pixel of the 3D panel's view (its camera as the command carries it).
     pub fn pick_branch_in_view(
         &self,
-        camera: &ViewCamera,
+        camera: &ViewCameraRecord,
         pixel: [f64; 2],
     ) -> Result<BranchPoint, EditError> {
         let view = StrokeView::from_view_camera(camera)?;
@@ -676,7 +676,7 @@ impl Session {
         let inside: Vec<u32> = members
             .iter()
             .enumerate()
-            .filter(|(i, _)| flow.segment(*i) == CutSide::Source)
+            .filter(|(i, _)| flow.side(*i) == CutSide::Source)
             .map(|(_, &p)| p)
             .collect();
         if inside.is_empty() || inside.len() == members.len() {

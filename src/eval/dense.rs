@@ -3,12 +3,12 @@
 //! ground-truth surface samples (point-to-plane, so the samples' spacing does not count as
 //! error), bounded by the distance to the nearest sample.
 
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::Point3;
 use rayon::prelude::*;
 use serde::Serialize;
 
 use super::{EvalError, GroundTruth, input_error};
+use crate::graph::neighbours::Neighbours;
 use crate::graph::shape::Shape;
 use crate::util::stats::quantile_sorted;
 
@@ -42,10 +42,9 @@ pub fn point_accuracy(
         .parts
         .as_ref()
         .ok_or_else(|| input_error(&gt.root, "surface_samples.ply has no part column"))?;
-    let coordinates: Vec<[f64; 3]> = samples.positions.iter().map(|p| [p.x, p.y, p.z]).collect();
-    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&coordinates)
+    let sample_neighbours = Neighbours::new(samples.positions.iter().copied())
         .map_err(|e| input_error(&gt.root, format!("cannot index surface samples: {e:?}")))?;
-    let Some(neighbours) = std::num::NonZero::new(8.min(coordinates.len())) else {
+    let Some(neighbours) = std::num::NonZero::new(8.min(sample_neighbours.len())) else {
         return Err(input_error(&gt.root, "no surface samples"));
     };
     let gate = gate_fraction_of_height * gt.plant_height;
@@ -53,19 +52,16 @@ pub fn point_accuracy(
     let hits: Vec<Option<(f64, usize)>> = points
         .par_iter()
         .map(|p| {
-            let nearest = tree
-                .query(&[p.x, p.y, p.z])
-                .nearest_n::<SquaredEuclidean<f64>>(neighbours)
-                .execute();
+            let nearest = sample_neighbours.nearest_k(p, neighbours);
             let first = nearest.first()?;
-            let sample = first.item as usize;
-            let distance = first.distance.sqrt();
+            let sample = first.index;
+            let distance = first.distance();
             if !parts[sample].is_plant() || distance > gate {
                 return None;
             }
             let same: Vec<Point3<f64>> = nearest
                 .iter()
-                .map(|n| n.item as usize)
+                .map(|n| n.index)
                 .filter(|&i| {
                     samples.leaf_ids[i] == samples.leaf_ids[sample] && parts[i] == parts[sample]
                 })

@@ -18,13 +18,13 @@ pub mod metrics;
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
 pub use align::{Similarity, umeyama};
 pub use metrics::{LeafScores, MatchingOptions, adjusted_rand_index, score_leaves};
 
+use crate::graph::neighbours::Neighbours;
 use crate::mesh::TriMesh;
 use crate::scene::ply::{self, Ply};
 use crate::scene::{SceneError, read_model};
@@ -418,8 +418,7 @@ fn pair_points(
             "no surface samples to transfer labels from",
         ));
     }
-    let coordinates: Vec<[f64; 3]> = samples.positions.iter().map(|p| [p.x, p.y, p.z]).collect();
-    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&coordinates)
+    let sample_neighbours = Neighbours::new(samples.positions.iter().copied())
         .map_err(|e| input_error(&gt.root, format!("cannot index surface samples: {e:?}")))?;
     let radius = options.transfer_radius * gt.plant_height;
     let (leaves, parts) = pred
@@ -427,12 +426,9 @@ fn pair_points(
         .positions
         .iter()
         .map(|p| {
-            let nearest = tree
-                .query(&[p.x, p.y, p.z])
-                .nearest_one::<SquaredEuclidean<f64>>()
-                .execute();
-            if nearest.distance.sqrt() <= radius {
-                let i = nearest.item as usize;
+            let nearest = sample_neighbours.nearest_one(p);
+            if nearest.distance() <= radius {
+                let i = nearest.index;
                 (samples.leaf_ids[i], sample_parts[i])
             } else {
                 (-1, Part::Background)

@@ -3,9 +3,9 @@
 //! is. Points on a leaf have flat neighbourhoods; points on a thin stem or petiole have
 //! neighbourhoods that wrap around it: thick and elongated.
 
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
+use super::neighbours::Neighbours;
 use super::points::PointSet;
 use super::shape::Shape;
 
@@ -19,28 +19,27 @@ pub struct LocalShape {
     pub normal: nalgebra::Vector3<f64>,
 }
 
+/// The principal-component shape of the neighbourhood of the tree's point `i`: the point and
+/// its `k` nearest neighbours ([`Neighbours::around`]).
+pub fn shape_around(neighbours: &Neighbours, i: usize, k: usize) -> Shape {
+    let around = neighbours.around(i, k);
+    Shape::of(around.iter().map(|n| neighbours.point(n.index)))
+}
+
 /// Local shapes of every point from its `k` nearest neighbours (itself included).
 pub fn local_shapes(points: &PointSet, k: usize) -> Vec<LocalShape> {
-    let coordinates: Vec<[f64; 3]> = points.positions.iter().map(|p| [p.x, p.y, p.z]).collect();
     let fallback = LocalShape {
         thickness: 0.0,
         elongation: 1.0,
         normal: nalgebra::Vector3::z(),
     };
-    let Ok(tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&coordinates) else {
+    let Ok(neighbours) = Neighbours::new(points.positions.iter().copied()) else {
         return vec![fallback; points.len()];
     };
-    let Some(wanted) = std::num::NonZero::new((k + 1).min(points.len())) else {
-        return Vec::new();
-    };
-    coordinates
-        .par_iter()
-        .map(|c| {
-            let neighbours = tree
-                .query(c)
-                .nearest_n::<SquaredEuclidean<f64>>(wanted)
-                .execute();
-            let shape = Shape::of(neighbours.iter().map(|r| points.positions[r.item as usize]));
+    (0..neighbours.len())
+        .into_par_iter()
+        .map(|i| {
+            let shape = shape_around(&neighbours, i, k);
             if shape.count < 4 {
                 return fallback;
             }
@@ -50,6 +49,18 @@ pub fn local_shapes(points: &PointSet, k: usize) -> Vec<LocalShape> {
                 normal: shape.normal(),
             }
         })
+        .collect()
+}
+
+/// Unit normals from the principal components of each point's `k` nearest neighbours and
+/// itself (unoriented; however few the points, unlike [`local_shapes`]).
+pub fn estimate_normals(points: &PointSet, k: usize) -> Vec<nalgebra::Vector3<f64>> {
+    let Ok(neighbours) = Neighbours::new(points.positions.iter().copied()) else {
+        return vec![nalgebra::Vector3::z(); points.len()];
+    };
+    (0..neighbours.len())
+        .into_par_iter()
+        .map(|i| shape_around(&neighbours, i, k).normal())
         .collect()
 }
 
@@ -64,25 +75,17 @@ pub fn normal_coherence(
     normals: &[nalgebra::Vector3<f64>],
     k: usize,
 ) -> Vec<f64> {
-    let coordinates: Vec<[f64; 3]> = points.positions.iter().map(|p| [p.x, p.y, p.z]).collect();
-    let Ok(tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&coordinates) else {
+    let Ok(neighbours) = Neighbours::new(points.positions.iter().copied()) else {
         return vec![1.0; points.len()];
     };
-    let Some(wanted) = std::num::NonZero::new((k + 1).min(points.len())) else {
-        return Vec::new();
-    };
-    coordinates
-        .par_iter()
-        .enumerate()
-        .map(|(i, c)| {
-            let neighbours = tree
-                .query(c)
-                .nearest_n::<SquaredEuclidean<f64>>(wanted)
-                .execute();
+    (0..neighbours.len())
+        .into_par_iter()
+        .map(|i| {
             let mut agreement: Vec<f64> = neighbours
+                .around(i, k)
                 .iter()
-                .filter(|r| r.item as usize != i)
-                .map(|r| normals[r.item as usize].dot(&normals[i]).abs())
+                .filter(|n| n.index != i)
+                .map(|n| normals[n.index].dot(&normals[i]).abs())
                 .collect();
             if agreement.is_empty() {
                 return 1.0;

@@ -11,7 +11,7 @@ use std::collections::VecDeque;
 
 /// Which side of the minimum cut a node is on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Segment {
+pub enum CutSide {
     Source,
     Sink,
 }
@@ -445,10 +445,10 @@ impl MaxFlow {
 
     /// The side of the minimum cut of a node (after [`MaxFlow::solve`]): the source side is
     /// what the source still reaches through residual capacity.
-    pub fn segment(&self, node: usize) -> Segment {
+    pub fn side(&self, node: usize) -> CutSide {
         match self.tree.get(node) {
-            Some(Tree::Source) => Segment::Source,
-            _ => Segment::Sink,
+            Some(Tree::Source) => CutSide::Source,
+            _ => CutSide::Sink,
         }
     }
 }
@@ -483,9 +483,9 @@ mod tests {
         g.add_edge(0, 1, 2.0, 2.0).unwrap();
         g.add_edge(1, 2, 5.0, 5.0).unwrap();
         assert_eq!(g.solve(), 2.0);
-        assert_eq!(g.segment(0), Segment::Source);
-        assert_eq!(g.segment(1), Segment::Sink);
-        assert_eq!(g.segment(2), Segment::Sink);
+        assert_eq!(g.side(0), CutSide::Source);
+        assert_eq!(g.side(1), CutSide::Sink);
+        assert_eq!(g.side(2), CutSide::Sink);
         assert!(g.add_edge(0, 3, 1.0, 1.0).is_err());
         assert!(g.add_edge(0, 1, -1.0, 1.0).is_err());
         assert!(g.add_terminal_weights(1, f64::NAN, 0.0).is_err());
@@ -568,7 +568,7 @@ mod tests {
                 "seed {seed}: {flow} vs {expected}"
             );
             // The cut induced by the segments has exactly the flow's capacity.
-            let side: Vec<bool> = (0..n).map(|i| g.segment(i) == Segment::Source).collect();
+            let side: Vec<bool> = (0..n).map(|i| g.side(i) == CutSide::Source).collect();
             let mut cut = 0.0;
             for i in 0..n {
                 if side[i] {

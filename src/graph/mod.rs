@@ -1,6 +1,6 @@
 //! The weighted point graph of seed 004 §5.1 and its partition into leaves.
 //!
-//! A node per 3D point; edges to the K nearest neighbours in 3D (kiddo), kept only when both
+//! A node per 3D point; edges to the K nearest neighbours in 3D ([`neighbours`]), kept only when both
 //! ends are seen together in at least one view. Each edge carries
 //! `d = (1−α)·d3D/(√2σ3D) + α·d2D/(√2σ2D)` and weight `w = exp(−d²)`, where `d2D` is the
 //! largest colour gradient crossed by the edge's projection over the common views. Edges with
@@ -13,18 +13,20 @@ pub mod lanczos;
 pub mod local_shape;
 pub mod maxflow;
 pub mod ncut;
+pub mod neighbours;
 pub mod points;
 pub mod shape;
 #[cfg(test)]
 pub(crate) mod test_support;
 pub mod visibility;
 
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Isometry3, Point2};
 use rayon::prelude::*;
 use serde::Serialize;
 
 use gradient::GradientImage;
+pub use local_shape::estimate_normals;
+use neighbours::Neighbours;
 use points::{PointSet, common_views};
 
 use crate::scene::Camera;
@@ -104,22 +106,16 @@ pub fn knn_pairs(points: &PointSet, k: usize) -> Vec<(u32, u32)> {
     if n < 2 || k == 0 {
         return Vec::new();
     }
-    let coordinates: Vec<[f64; 3]> = points.positions.iter().map(|p| [p.x, p.y, p.z]).collect();
-    let Ok(tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&coordinates) else {
+    let Ok(neighbours) = Neighbours::new(points.positions.iter().copied()) else {
         return Vec::new();
     };
-    let wanted = std::num::NonZero::new((k + 1).min(n)).unwrap_or(std::num::NonZero::<usize>::MIN);
-    let mut pairs: Vec<(u32, u32)> = coordinates
-        .par_iter()
-        .enumerate()
-        .flat_map_iter(|(i, c)| {
-            let neighbours = tree
-                .query(c)
-                .nearest_n::<SquaredEuclidean<f64>>(wanted)
-                .execute();
+    let mut pairs: Vec<(u32, u32)> = (0..n)
+        .into_par_iter()
+        .flat_map_iter(|i| {
             neighbours
+                .around(i, k)
                 .into_iter()
-                .map(|r| r.item as usize)
+                .map(|r| r.index)
                 .filter(move |&j| j != i)
                 .take(k)
                 .map(move |j| (i.min(j) as u32, i.max(j) as u32))
@@ -129,27 +125,6 @@ pub fn knn_pairs(points: &PointSet, k: usize) -> Vec<(u32, u32)> {
     pairs.par_sort_unstable();
     pairs.dedup();
     pairs
-}
-
-/// Unit normals from the principal components of each point's `k` nearest neighbours
-/// (unoriented).
-pub fn estimate_normals(points: &PointSet, k: usize) -> Vec<nalgebra::Vector3<f64>> {
-    let coordinates: Vec<[f64; 3]> = points.positions.iter().map(|p| [p.x, p.y, p.z]).collect();
-    let Ok(tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&coordinates) else {
-        return vec![nalgebra::Vector3::z(); points.len()];
-    };
-    let wanted = std::num::NonZero::new((k + 1).min(points.len()).max(1))
-        .unwrap_or(std::num::NonZero::<usize>::MIN);
-    coordinates
-        .par_iter()
-        .map(|c| {
-            let neighbours = tree
-                .query(c)
-                .nearest_n::<SquaredEuclidean<f64>>(wanted)
-                .execute();
-            shape::Shape::of(neighbours.iter().map(|r| points.positions[r.item as usize])).normal()
-        })
-        .collect()
 }
 
 /// Views seeing a surface more obliquely than this (cosine of the angle between the viewing
@@ -165,7 +140,7 @@ impl PointGraph {
         let pairs = knn_pairs(points, options.knn);
         let use_images = options.alpha > 0.0;
         let normals = estimate_normals(points, 10);
-        let depth_maps = use_images.then(|| visibility::DepthMaps::build(points, views, 2.0));
+        let depth_maps = use_images.then(|| visibility::SplatDepthMaps::build(points, views, 2.0));
         // Per edge: (a, b, d3D, d2D, Σg², #g) over the gradient samples of all common views.
         type Measured = Option<(u32, u32, f32, f32, f64, usize)>;
         let measured: Vec<Measured> = pairs

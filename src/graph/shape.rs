@@ -4,6 +4,8 @@
 use nalgebra::{Matrix3, Point3, SymmetricEigen, Vector3};
 use serde::Serialize;
 
+use crate::util::geometry::cubic_monomials;
+
 /// Principal-component shape of a point group.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Shape {
@@ -86,8 +88,8 @@ impl Shape {
         self.height_field_residual::<10>(points)
     }
 
-    /// RMS residual of a polynomial height field with the first `N` monomials of
-    /// `1, u, v, u², uv, v², u³, u²v, uv², v³`, relative to the length.
+    /// RMS residual of a polynomial height field with the first `N` of the
+    /// [`cubic_monomials`], relative to the length.
     fn height_field_residual<const N: usize>(
         &self,
         points: impl Iterator<Item = Point3<f64>>,
@@ -103,18 +105,7 @@ impl Shape {
                 d.dot(&self.axes[1]) / scale,
                 d.dot(&self.axes[2]) / scale,
             );
-            let all = [
-                1.0,
-                u,
-                v,
-                u * u,
-                u * v,
-                v * v,
-                u * u * u,
-                u * u * v,
-                u * v * v,
-                v * v * v,
-            ];
+            let all = cubic_monomials(u, v);
             let basis = nalgebra::SVector::<f64, N>::from_fn(|i, _| all[i]);
             normal_matrix += basis * basis.transpose();
             rhs += basis * w;

@@ -9,15 +9,16 @@ use rayon::prelude::*;
 use super::ViewData;
 use super::points::PointSet;
 
-/// A z-buffer of one view at `1/scale` of the image resolution.
-pub struct DepthMap {
+/// A z-buffer of one view at `1/scale` of the image resolution, splatted from the points
+/// themselves (not the dense stereo depth of [`crate::mvs::RectifiedDepthMap`]).
+pub struct SplatDepthMap {
     width: usize,
     height: usize,
     scale: f64,
     depth: Vec<f32>,
 }
 
-impl DepthMap {
+impl SplatDepthMap {
     /// Depth of the nearest splat at a pixel position (COLMAP convention), if any.
     fn depth_at(&self, x: f64, y: f64) -> Option<f32> {
         let (u, v) = (x / self.scale, y / self.scale);
@@ -32,11 +33,11 @@ impl DepthMap {
 }
 
 /// Coarse depth maps of all views, from the points themselves.
-pub struct DepthMaps {
-    maps: Vec<Option<DepthMap>>,
+pub struct SplatDepthMaps {
+    maps: Vec<Option<SplatDepthMap>>,
 }
 
-impl DepthMaps {
+impl SplatDepthMaps {
     /// Splats every point into every view that can project it, keeping the nearest depth.
     /// `cell_px` is the z-buffer cell size in image pixels (about the points' projected
     /// spacing, so the splats close up into surfaces).
@@ -72,7 +73,7 @@ impl DepthMaps {
                         }
                     }
                 }
-                Some(DepthMap {
+                Some(SplatDepthMap {
                     width,
                     height,
                     scale,

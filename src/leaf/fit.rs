@@ -9,6 +9,7 @@ use serde::Serialize;
 use super::template::LeafTemplate;
 use crate::graph::shape::Shape;
 use crate::mesh::TriMesh;
+use crate::util::geometry::cubic_monomials;
 use crate::util::polygon::{inside_polygon, polygon_area};
 use crate::util::stats::quantile;
 
@@ -74,6 +75,26 @@ impl LeafFrame {
     pub fn to_world(&self, q: &Point2<f64>, height: f64) -> Point3<f64> {
         self.origin + self.x_axis * q.x + self.y_axis * q.y + self.normal * height
     }
+
+    /// Where the viewing ray through `uv_image` meets the leaf plane, in plane coordinates;
+    /// `None` behind the camera, or where the ray grazes the plane (|cos| under 0.15).
+    pub fn back_project(
+        &self,
+        uv_image: &Point2<f64>,
+        camera: &crate::scene::Camera,
+        camera_from_world: &nalgebra::Isometry3<f64>,
+    ) -> Option<Point2<f64>> {
+        let ray_camera = camera.unproject(uv_image)?;
+        let world_from_camera = camera_from_world.inverse();
+        let origin = world_from_camera * Point3::origin();
+        let direction = (world_from_camera.rotation * ray_camera).normalize();
+        let denominator = direction.dot(&self.normal);
+        if denominator.abs() < 0.15 {
+            return None;
+        }
+        let t = (self.origin - origin).dot(&self.normal) / denominator;
+        (t > 0.0).then(|| self.to_plane(&(origin + direction * t)).0)
+    }
 }
 
 /// Where the plant is, for the orientation of leaves: they face up and away from what they
@@ -123,24 +144,6 @@ pub struct HeightField {
     max: f64,
 }
 
-fn monomials(u: f64, v: f64, terms: usize) -> [f64; 10] {
-    let all = [
-        1.0,
-        u,
-        v,
-        u * u,
-        u * v,
-        v * v,
-        u * u * u,
-        u * u * v,
-        u * v * v,
-        v * v * v,
-    ];
-    let mut out = [0.0; 10];
-    out[..terms].copy_from_slice(&all[..terms]);
-    out
-}
-
 impl HeightField {
     pub fn flat() -> Self {
         Self {
@@ -168,7 +171,7 @@ impl HeightField {
             let mut a = nalgebra::DMatrix::<f64>::zeros(terms, terms);
             let mut b = nalgebra::DVector::<f64>::zeros(terms);
             for ((q, h), w) in samples.iter().zip(&weights) {
-                let m = monomials(q.x / scale, q.y / scale, terms);
+                let m = cubic_monomials(q.x / scale, q.y / scale);
                 for i in 0..terms {
                     b[i] += w * m[i] * h;
                     for j in 0..terms {
@@ -187,7 +190,7 @@ impl HeightField {
             let residuals: Vec<f64> = samples
                 .iter()
                 .map(|(q, h)| {
-                    let m = monomials(q.x / scale, q.y / scale, terms);
+                    let m = cubic_monomials(q.x / scale, q.y / scale);
                     h - (0..terms).map(|i| coefficients[i] * m[i]).sum::<f64>()
                 })
                 .collect();
@@ -216,7 +219,7 @@ impl HeightField {
 
     pub fn at(&self, q: &Point2<f64>) -> f64 {
         let terms = self.coefficients.len();
-        let m = monomials(q.x / self.scale, q.y / self.scale, terms);
+        let m = cubic_monomials(q.x / self.scale, q.y / self.scale);
         let h: f64 = (0..terms).map(|i| self.coefficients[i] * m[i]).sum();
         h.clamp(self.min.min(0.0), self.max.max(0.0))
     }
@@ -434,17 +437,9 @@ fn back_project(
     view: &BoundaryView<'_>,
     frame: &LeafFrame,
 ) -> Option<Point2<f64>> {
-    let ray_camera = view.camera.unproject(pixel)?;
-    let world_from_camera = view.camera_from_world.inverse();
-    let origin = world_from_camera * Point3::origin();
-    let direction = (world_from_camera.rotation * ray_camera).normalize();
-    let denominator = direction.dot(&frame.normal);
-    if denominator.abs() < 0.15 {
-        return None;
-    }
-    let t = (frame.origin - origin).dot(&frame.normal) / denominator;
-    let q = frame.to_plane(&(origin + direction * t)).0;
-    (t > 0.0 && q.x.is_finite() && q.y.is_finite()).then_some(q)
+    frame
+        .back_project(pixel, view.camera, &view.camera_from_world)
+        .filter(|q| q.x.is_finite() && q.y.is_finite())
 }
 
 /// Texels per side for a leaf's texture: about one texel per photo pixel along the leaf's

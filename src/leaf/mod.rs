@@ -195,19 +195,10 @@ fn plane_polygon(
     let model = &scene.reconstruction;
     let image = &model.images()[view];
     let camera = model.camera_of(image);
-    let world_from_camera = image.camera_from_world.inverse();
-    let origin = world_from_camera * Point3::origin();
     let projected: Vec<Point2<f64>> = polygon
         .iter()
         .filter_map(|p| {
-            let ray = camera.unproject(&Point2::new(p[0], p[1]))?;
-            let direction = (world_from_camera.rotation * ray).normalize();
-            let denominator = direction.dot(&frame.normal);
-            if denominator.abs() < 0.15 {
-                return None;
-            }
-            let t = (frame.origin - origin).dot(&frame.normal) / denominator;
-            (t > 0.0).then(|| frame.to_plane(&(origin + direction * t)).0)
+            frame.back_project(&Point2::new(p[0], p[1]), camera, &image.camera_from_world)
         })
         .collect();
     (projected.len() >= 3 && projected.len() * 10 >= polygon.len() * 8).then_some(projected)

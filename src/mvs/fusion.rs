@@ -9,7 +9,7 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::stereo::DepthMap;
+use super::stereo::RectifiedDepthMap;
 use crate::util::geometry::closest_point_to_lines;
 use crate::util::progress::Progress;
 use crate::util::stats::median;
@@ -130,7 +130,7 @@ struct Candidate {
 }
 
 /// For each map, the other maps whose left views' axes are closest in angle.
-fn neighbour_maps(maps: &[DepthMap], count: usize) -> Vec<Vec<usize>> {
+fn neighbour_maps(maps: &[RectifiedDepthMap], count: usize) -> Vec<Vec<usize>> {
     let axes: Vec<Vector3<f64>> = maps
         .iter()
         .map(|m| m.camera.rect_from_world.inverse() * Vector3::z())
@@ -162,7 +162,7 @@ fn neighbour_maps(maps: &[DepthMap], count: usize) -> Vec<Vec<usize>> {
 /// Checks every `pixel_step`-th depth of `maps[p]` against its neighbours.
 fn consistent_samples(
     p: usize,
-    maps: &[DepthMap],
+    maps: &[RectifiedDepthMap],
     neighbours: &[usize],
     options: &FusionOptions,
     roi: Option<&RegionOfInterest>,
@@ -220,7 +220,7 @@ fn consistent_samples(
 
 /// Fuses depth maps into points (see the module docs). Deterministic.
 pub fn fuse(
-    maps: &[DepthMap],
+    maps: &[RectifiedDepthMap],
     options: &FusionOptions,
     roi: Option<&RegionOfInterest>,
     progress: &dyn Progress,
@@ -332,7 +332,7 @@ mod tests {
     const RADIUS: f64 = 0.5;
 
     /// Exact depth maps of a ball of radius 0.5 at the origin, one per ring neighbour pair.
-    fn sphere_maps(num_views: usize) -> Vec<DepthMap> {
+    fn sphere_maps(num_views: usize) -> Vec<RectifiedDepthMap> {
         let model = ring_model(num_views, 20);
         let images = model.images();
         let camera = model.camera_of(&images[0]);
@@ -362,7 +362,7 @@ mod tests {
                         }
                     }
                 }
-                DepthMap {
+                RectifiedDepthMap {
                     pair: StereoPair {
                         left,
                         right,

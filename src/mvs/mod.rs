@@ -24,7 +24,7 @@ use serde::Serialize;
 
 pub use fusion::{FusedPoints, FusionOptions, FusionStats, RegionOfInterest};
 pub use pairs::{PairOptions, StereoPair};
-pub use stereo::{DepthMap, StereoOptions};
+pub use stereo::{RectifiedDepthMap, StereoOptions};
 
 use crate::scene::model::{Image, Keypoint, Point3D, TrackElement};
 use crate::scene::ply::{Column, Element, Ply, ScalarType, encode_ply_binary};
@@ -182,7 +182,7 @@ pub fn depth_maps(
     scene: &Scene,
     options: &DensifyOptions,
     progress: &dyn Progress,
-) -> Result<(Vec<DepthMap>, DensifyReport), MvsError> {
+) -> Result<(Vec<RectifiedDepthMap>, DensifyReport), MvsError> {
     let model = &scene.reconstruction;
     let images = model.images();
     if images.len() < 2 {
@@ -246,7 +246,7 @@ pub fn depth_maps(
     lap("load", &mut report);
 
     progress.stage("stereo matching", pairs.len() as u64);
-    let outcomes: Vec<Result<DepthMap, SkippedPair>> = pairs
+    let outcomes: Vec<Result<RectifiedDepthMap, SkippedPair>> = pairs
         .par_iter()
         .map(|pair| {
             let result = match_one(scene, pair, view_of, roi.as_ref(), options);
@@ -284,7 +284,7 @@ pub fn depth_maps(
         .map(|m| (m.camera.width * m.camera.height) as f64)
         .sum::<f64>()
         / maps.len() as f64;
-    report.depth_pixels = maps.iter().map(DepthMap::valid_pixels).sum();
+    report.depth_pixels = maps.iter().map(RectifiedDepthMap::valid_pixels).sum();
     lap("stereo", &mut report);
 
     Ok((maps, report))
@@ -297,7 +297,7 @@ fn match_one<'a>(
     view_of: impl Fn(usize) -> &'a LoadedView,
     roi: Option<&RegionOfInterest>,
     options: &DensifyOptions,
-) -> Result<DepthMap, SkippedPair> {
+) -> Result<RectifiedDepthMap, SkippedPair> {
     let model = &scene.reconstruction;
     let images = model.images();
     let (left, right) = (&images[pair.left], &images[pair.right]);

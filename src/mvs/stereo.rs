@@ -43,9 +43,11 @@ pub struct LoadedView {
     pub scale: (f64, f64),
 }
 
-/// The left view's depths on its rectified grid (0 = no depth) and its colours.
+/// The left view's depths on its rectified grid (0 = no depth) and its colours: the result of
+/// stereo matching one pair (not the occlusion z-buffer of
+/// [`crate::graph::visibility::SplatDepthMap`]).
 #[derive(Clone, Debug)]
-pub struct DepthMap {
+pub struct RectifiedDepthMap {
     pub pair: StereoPair,
     pub camera: RectifiedCamera,
     /// Rectified depth per pixel, row-major; 0 where matching gave nothing.
@@ -56,7 +58,7 @@ pub struct DepthMap {
     pub disparity_range: (i32, i32),
 }
 
-impl DepthMap {
+impl RectifiedDepthMap {
     pub fn depth_at(&self, i: usize, j: usize) -> f32 {
         self.depth[j * self.camera.width + i]
     }
@@ -155,7 +157,7 @@ pub fn match_pair(
     tables: (&ResamplingTable, &ResamplingTable),
     range: (i32, i32),
     options: &StereoOptions,
-) -> opencv::Result<DepthMap> {
+) -> opencv::Result<RectifiedDepthMap> {
     let left = remap(views.0, tables.0, &rectified.left)?;
     let right = remap(views.1, tables.1, &rectified.right)?;
     let block = options.block_size.max(1) | 1;
@@ -201,7 +203,7 @@ pub fn match_pair(
     }
     let bgr: &[opencv::core::Vec3b] = left.data_typed()?;
     let colors = bgr.iter().map(|p| [p[2], p[1], p[0]]).collect();
-    Ok(DepthMap {
+    Ok(RectifiedDepthMap {
         pair,
         camera: rectified.left.clone(),
         depth,

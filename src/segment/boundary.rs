@@ -12,7 +12,7 @@ use opencv::prelude::*;
 use serde::Serialize;
 
 use crate::graph::gradient::GradientImage;
-use crate::graph::maxflow::{MaxFlow, MaxFlowError, Segment};
+use crate::graph::maxflow::{CutSide, MaxFlow, MaxFlowError};
 
 /// Settings of oversegmentation and graph cut.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -417,7 +417,7 @@ impl Oversegmentation {
             flow.add_edge(a as usize, b as usize, weight, weight)?;
         }
         flow.solve();
-        let inside: Vec<bool> = (0..n).map(|l| flow.segment(l) == Segment::Source).collect();
+        let inside: Vec<bool> = (0..n).map(|l| flow.side(l) == CutSide::Source).collect();
 
         // Outer contour of the largest connected region.
         let mut mask = Mat::new_rows_cols_with_default(

@@ -9,10 +9,9 @@
 use nalgebra::{Point3, Vector3};
 use serde::Serialize;
 
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
-
 use crate::graph::components::Adjacency;
 use crate::graph::knn_pairs;
+use crate::graph::neighbours::Neighbours;
 use crate::graph::points::PointSet;
 use crate::scene::Reconstruction;
 use crate::util::geometry::closest_point_to_lines;
@@ -128,24 +127,18 @@ fn ransac_plane(
     if candidates.len() < 20 {
         return None;
     }
-    let coordinates: Vec<[f64; 3]> = candidates
-        .iter()
-        .map(|&i| [points[i].x, points[i].y, points[i].z])
-        .collect();
-    let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&coordinates).ok()?;
-    let neighbours = std::num::NonZero::new(17usize.min(candidates.len()))?;
+    let neighbours = Neighbours::new(candidates.iter().map(|&i| points[i])).ok()?;
+    let hypothesis_points = std::num::NonZero::new(17usize.min(candidates.len()))?;
     let sample: Vec<usize> = (0..candidates.len().min(6000))
         .map(|_| candidates[rng.below(candidates.len())])
         .collect();
     let mut best: Option<(Plane, usize)> = None;
     for _ in 0..iterations {
         let seed = rng.below(candidates.len());
-        let local: Vec<Point3<f64>> = tree
-            .query(&coordinates[seed])
-            .nearest_n::<SquaredEuclidean<f64>>(neighbours)
-            .execute()
+        let local: Vec<Point3<f64>> = neighbours
+            .nearest_k(&points[candidates[seed]], hypothesis_points)
             .iter()
-            .map(|r| points[candidates[r.item as usize]])
+            .map(|r| points[candidates[r.index]])
             .collect();
         let Some(plane) = Plane::fit(&local) else {
             continue;

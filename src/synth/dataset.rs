@@ -31,6 +31,7 @@ use crate::scene::ply::{Column, Element, Ply, ScalarType, encode_ply_binary};
 use crate::scene::synthetic::look_at;
 use crate::scene::{Camera, CameraModelKind, ModelFormat, SceneError, write_model};
 use crate::util::atomic::{StagedDir, write_atomic};
+use crate::util::geometry::bounding_box;
 use crate::util::progress::Progress;
 use crate::util::rng::Rng;
 
@@ -141,13 +142,7 @@ pub fn ring_cameras(
     )
     .unwrap_or_else(|e| unreachable!("ring camera intrinsics are valid: {e}"));
     let points = plant.framing_points();
-    let (lo, hi) = points.iter().fold(
-        (
-            Point3::from([f64::INFINITY; 3]),
-            Point3::from([f64::NEG_INFINITY; 3]),
-        ),
-        |(lo, hi), p| (lo.inf(p), hi.sup(p)),
-    );
+    let (lo, hi) = bounding_box(&points);
     let target = nalgebra::center(&lo, &hi);
     let low = views.div_ceil(2);
     let directions: Vec<nalgebra::Vector3<f64>> = [(low, 0, 0.0), (views - low, 1, 0.5)]

@@ -12,6 +12,7 @@ use super::leaf::{LeafGeometry, LeafMeshing, LeafShape};
 use super::texture::LeafLook;
 use crate::branch::{Branch, BranchTree, GeneralizedCylinder, Spline};
 use crate::mesh::TriMesh;
+use crate::util::geometry::bounding_box;
 use crate::util::rng::Rng;
 
 /// The plant presets.
@@ -293,13 +294,7 @@ pub fn generate_plant(preset: Preset, seed: u64) -> SynthPlant {
             0.0,
         ));
     }
-    let (lo, hi) = points.iter().fold(
-        (
-            Point3::from([f64::INFINITY; 3]),
-            Point3::from([f64::NEG_INFINITY; 3]),
-        ),
-        |(lo, hi), p| (lo.inf(p), hi.sup(p)),
-    );
+    let (lo, hi) = bounding_box(&points);
     let center = nalgebra::center(&lo, &hi);
     let radius = points
         .iter()

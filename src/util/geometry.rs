@@ -12,6 +12,36 @@ pub fn any_perpendicular(v: &Vector3<f64>) -> Vector3<f64> {
     v.cross(&helper).normalize()
 }
 
+/// The axis-aligned box `(min, max)` around `points` (infinite and inverted for none).
+pub fn bounding_box<'a>(
+    points: impl IntoIterator<Item = &'a Point3<f64>>,
+) -> (Point3<f64>, Point3<f64>) {
+    points.into_iter().fold(
+        (
+            Point3::from([f64::INFINITY; 3]),
+            Point3::from([f64::NEG_INFINITY; 3]),
+        ),
+        |(lo, hi), p| (lo.inf(p), hi.sup(p)),
+    )
+}
+
+/// The monomials of a bivariate cubic, `1, u, v, u², uv, v², u³, u²v, uv², v³`: a height field
+/// over a plane built from the first 1, 3, 6 or 10 is constant, planar, quadratic or cubic.
+pub fn cubic_monomials(u: f64, v: f64) -> [f64; 10] {
+    [
+        1.0,
+        u,
+        v,
+        u * u,
+        u * v,
+        v * v,
+        u * u * u,
+        u * u * v,
+        u * v * v,
+        v * v * v,
+    ]
+}
+
 /// The least-squares point closest to all lines `(origin, direction)` (e.g. the point a
 /// ring of cameras looks at). `None` when the lines are (nearly) parallel, so that the
 /// system is ill-conditioned: smallest eigenvalue below 1e-3 of the largest.

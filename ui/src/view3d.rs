@@ -29,7 +29,7 @@ use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaterni
 use crate::image_view::{Action, segment_color};
 use crate::tools::{Tool, grab_handle, release_handle};
 use crate::workspace::Workspace;
-use frond::edit::{BranchStroke, BranchTarget, Command, ViewCamera as EditCamera};
+use frond::edit::{BranchStroke, BranchTarget, Command, ViewCameraRecord as EditCamera};
 
 /// Side of the palette texture: colour `k` is texel `(k mod side, k div side)`.
 const PALETTE_SIDE: u32 = 64;
@@ -904,16 +904,7 @@ impl View3d {
         let rect = self.rect?;
         let width = (rect.width() * pixels_per_point).round().max(1.0) as u32;
         let height = (rect.height() * pixels_per_point).round().max(1.0) as u32;
-        let view = orbit.view_camera(width, height);
-        let q = view.camera_from_world.rotation.quaternion().coords;
-        let t = view.camera_from_world.translation.vector;
-        Some(EditCamera {
-            rotation: [q.w, q.x, q.y, q.z],
-            translation: [t.x, t.y, t.z],
-            focal_px: view.fx,
-            width,
-            height,
-        })
+        Some(EditCamera::from_view(&orbit.view_camera(width, height)))
     }
 
     /// The branch tools in the 3D view: Draw (stroke), Move and Radius (drag a handle), Leaf

@@ -1,0 +1,156 @@
+//! Neighbourhood queries over 3D points: the one k-d tree (kiddo) behind the kNN graph of seed
+//! 004 §5.1, the local shape of each point (PCA of its nearest neighbours, [`super::local_shape`]),
+//! the skeleton's graph and gap joins, the floor RANSAC and the evaluation's nearest surface
+//! samples.
+//!
+//! Results are nearest first, with squared distances, in kiddo's order for equally near
+//! points; the stages depend on that order, so every query goes through here.
+
+use std::num::NonZero;
+
+use kiddo::kd_tree::ConstructionError;
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use nalgebra::Point3;
+
+/// A point found near a query.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Neighbour {
+    /// Index of the point in the points the [`Neighbours`] were built from.
+    pub index: usize,
+    /// Squared distance to the query.
+    pub distance_squared: f64,
+}
+
+impl Neighbour {
+    /// Distance to the query.
+    pub fn distance(&self) -> f64 {
+        self.distance_squared.sqrt()
+    }
+}
+
+/// A k-d tree over points (one frame, f64 coordinates) answering nearest-neighbour queries.
+pub struct Neighbours {
+    tree: ImmutableKdTree<f64, 3>,
+    coordinates: Vec<[f64; 3]>,
+}
+
+impl Neighbours {
+    /// The tree over `points`; neighbours are reported by their index in this sequence.
+    pub fn new(points: impl IntoIterator<Item = Point3<f64>>) -> Result<Self, ConstructionError> {
+        let coordinates: Vec<[f64; 3]> = points.into_iter().map(|p| [p.x, p.y, p.z]).collect();
+        let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&coordinates)?;
+        Ok(Self { tree, coordinates })
+    }
+
+    /// Number of points in the tree.
+    pub fn len(&self) -> usize {
+        self.coordinates.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.coordinates.is_empty()
+    }
+
+    /// The tree's point `i`.
+    pub fn point(&self, i: usize) -> Point3<f64> {
+        Point3::from(self.coordinates[i])
+    }
+
+    /// The `k` nearest points to `query`, nearest first (fewer when the tree holds fewer).
+    pub fn nearest_k(&self, query: &Point3<f64>, k: NonZero<usize>) -> Vec<Neighbour> {
+        self.nearest_k_to(&[query.x, query.y, query.z], k)
+    }
+
+    /// The nearest point to `query`: the first of [`Neighbours::nearest_k`] with `k` = 1.
+    /// `None` for an empty tree.
+    pub fn nearest(&self, query: &Point3<f64>) -> Option<Neighbour> {
+        self.nearest_k(query, NonZero::<usize>::MIN)
+            .first()
+            .copied()
+    }
+
+    /// The nearest point to `query` by kiddo's single-nearest search: the same distance as
+    /// [`Neighbours::nearest`], but among points exactly as near it may return another one.
+    /// Meaningless for an empty tree.
+    pub fn nearest_one(&self, query: &Point3<f64>) -> Neighbour {
+        let found = self
+            .tree
+            .query(&[query.x, query.y, query.z])
+            .nearest_one::<SquaredEuclidean<f64>>()
+            .execute();
+        Neighbour {
+            index: found.item as usize,
+            distance_squared: found.distance,
+        }
+    }
+
+    /// The `k` nearest neighbours of the tree's point `i` and the point itself (so `k + 1`
+    /// points, at most all of them), nearest first. Where other points coincide with `i`,
+    /// the point itself need not come first.
+    pub fn around(&self, i: usize, k: usize) -> Vec<Neighbour> {
+        let wanted = NonZero::new((k + 1).min(self.len())).unwrap_or(NonZero::<usize>::MIN);
+        self.nearest_k_to(&self.coordinates[i], wanted)
+    }
+
+    fn nearest_k_to(&self, query: &[f64; 3], k: NonZero<usize>) -> Vec<Neighbour> {
+        self.tree
+            .query(query)
+            .nearest_n::<SquaredEuclidean<f64>>(k)
+            .execute()
+            .into_iter()
+            .map(|found| Neighbour {
+                index: found.item as usize,
+                distance_squared: found.distance,
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn brute_force(points: &[Point3<f64>], query: &Point3<f64>) -> Vec<f64> {
+        let mut distances: Vec<f64> = points.iter().map(|p| (p - query).norm_squared()).collect();
+        distances.sort_by(f64::total_cmp);
+        distances
+    }
+
+    #[test]
+    fn nearest_k_matches_a_brute_force_search() {
+        let points: Vec<Point3<f64>> = (0..500)
+            .map(|i| {
+                let t = i as f64;
+                Point3::new((t * 0.37).sin(), (t * 0.11).cos(), (t * 0.05).sin() * 0.5)
+            })
+            .collect();
+        let neighbours = Neighbours::new(points.iter().copied()).unwrap();
+        assert_eq!(neighbours.len(), points.len());
+        let query = Point3::new(0.1, -0.2, 0.05);
+        let expected = brute_force(&points, &query);
+        let found = neighbours.nearest_k(&query, NonZero::new(12).unwrap());
+        assert_eq!(found.len(), 12);
+        for (f, e) in found.iter().zip(&expected) {
+            assert_eq!(f.distance_squared, *e);
+            assert_eq!((points[f.index] - query).norm_squared(), *e);
+        }
+        let nearest = neighbours.nearest(&query).unwrap();
+        assert_eq!(nearest.distance_squared, expected[0]);
+        assert_eq!(neighbours.nearest_one(&query).distance_squared, expected[0]);
+        assert_eq!(nearest.distance(), expected[0].sqrt());
+        // Around a point of the set: the point itself (distance 0) and its k neighbours.
+        let around = neighbours.around(7, 5);
+        assert_eq!(around.len(), 6);
+        assert_eq!(around[0].index, 7);
+        assert_eq!(around[0].distance_squared, 0.0);
+        assert_eq!(
+            around
+                .iter()
+                .map(|n| n.distance_squared)
+                .collect::<Vec<_>>(),
+            brute_force(&points, &points[7])[..6]
+        );
+        // Never more than the tree holds.
+        assert_eq!(neighbours.around(0, 10_000).len(), points.len());
+    }
+}
