@@ -7,9 +7,9 @@
 //! by SfM's points, which cluster on texture. Takes a scene; returns a [`PointDensity`] with
 //! the decision.
 
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use serde::Serialize;
 
+use crate::graph::neighbours::Neighbours;
 use crate::graph::points::PointSet;
 use crate::scene::Scene;
 
@@ -84,25 +84,20 @@ fn spacing_in_footprints(
     if n <= NEIGHBOURS {
         return f64::NAN;
     }
-    let coordinates: Vec<[f64; 3]> = positions.iter().map(|p| [p.x, p.y, p.z]).collect();
-    let Ok(tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&coordinates) else {
+    let Ok(neighbours) = Neighbours::new(positions.iter().copied()) else {
         return f64::NAN;
     };
-    let wanted = std::num::NonZero::new(NEIGHBOURS + 1).unwrap_or(std::num::NonZero::<usize>::MIN);
     let stride = n.div_ceil(SAMPLES).max(1);
     let mut ratios: Vec<f64> = (0..n)
         .step_by(stride)
         .filter_map(|i| {
             let footprint = footprint(i)?;
-            let radius = tree
-                .query(&coordinates[i])
-                .nearest_n::<SquaredEuclidean<f64>>(wanted)
-                .execute()
+            let radius = neighbours
+                .around(i, NEIGHBOURS)
                 .into_iter()
-                .filter(|r| r.item as usize != i)
+                .filter(|r| r.index != i)
                 .nth(NEIGHBOURS - 1)?
-                .distance
-                .sqrt();
+                .distance();
             Some(radius * (std::f64::consts::PI / NEIGHBOURS as f64).sqrt() / footprint)
         })
         .collect();
