@@ -3,6 +3,8 @@
 //!
 //! Submodule `primitives` appends small marker meshes (octahedra, tetrahedra, bars, camera
 //! frusta) to a [`TriMesh`].
+//!
+//! Takes and returns [`TriMesh`]es (positions, normals, uvs, triangles).
 
 pub mod primitives;
 

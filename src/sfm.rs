@@ -9,7 +9,8 @@
 //! - `dense/`: COLMAP's undistorted workspace (`images/`, `sparse/`) for `frond densify`;
 //! - `sfm.json`: steps, timings, registered and unregistered photos.
 //!
-//! The folder is assembled beside its destination and renamed into place.
+//! The folder is assembled beside its destination and renamed into place. Takes a folder of
+//! photos and [`SfmOptions`]; returns an [`SfmReport`].
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

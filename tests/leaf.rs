@@ -421,3 +421,29 @@ fn the_readme_names_every_field_the_outputs_hold() {
         report["version"]
     )));
 }
+
+#[test]
+fn every_output_file_reads_back_through_its_one_reader_type() {
+    let out = reconstruction();
+    // Each typed reader sees every field the writer wrote: written again, it is the file.
+    let report = frond::pipeline::ReconstructionReport::read(&out.join("report.json")).unwrap();
+    assert_eq!(
+        serde_json::to_value(&report).unwrap(),
+        read_json(&out.join("report.json"))
+    );
+    let segments = frond::pipeline::SegmentsFile::read(&out.join("segments.json")).unwrap();
+    assert_eq!(
+        serde_json::to_value(&segments).unwrap(),
+        read_json(&out.join("segments.json"))
+    );
+    let skeleton = frond::branch::plant::SkeletonFile::read(&out.join("skeleton.json")).unwrap();
+    assert_eq!(
+        serde_json::to_value(&skeleton).unwrap(),
+        read_json(&out.join("skeleton.json"))
+    );
+    // A file of another kind is refused with its path.
+    let error = frond::pipeline::ReconstructionReport::read(&out.join("segments.json"))
+        .unwrap_err()
+        .to_string();
+    assert!(error.contains("segments.json"), "{error}");
+}

@@ -4,7 +4,7 @@
 //! leaf scaled by their thickness.
 
 use nalgebra::{Point2, Point3, Vector3};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::{BranchTree, GeneralizedCylinder, Spline};
 use crate::leaf::fit::{Affine2, LeafFrame};
@@ -32,7 +32,7 @@ pub struct Petiole {
 }
 
 /// Why a synthesized leaf is there.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum PosedKind {
     /// A leaf segment with too few points to fit.
@@ -58,7 +58,7 @@ pub struct PosedLeaf {
 }
 
 /// The average reconstructed leaf: median length and width-to-length ratio of the fits.
-#[derive(Clone, Copy, Debug, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct AverageLeaf {
     pub length: f64,
     /// Width scale over length scale of the template→leaf map.

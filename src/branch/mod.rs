@@ -7,6 +7,10 @@
 //!
 //! `handles` projects a tree into a view (a photo or the GUI's 3D camera) as the handles the
 //! user drags, and finds the handle under a press.
+//!
+//! Takes spline control points, radii and parents (drawn, or found by [`skeleton`] from the
+//! non-leaf points); returns a [`BranchTree`], its meshes ([`plant`]) and the leaves attached to
+//! it ([`attach`]).
 
 pub mod attach;
 pub mod handles;

@@ -19,7 +19,7 @@ use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap};
 
 use nalgebra::{Point3, Vector3};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::{Branch, BranchTree, GeneralizedCylinder, Spline};
 use crate::graph::neighbours::Neighbours;
@@ -54,7 +54,7 @@ impl Default for SkeletonOptions {
 }
 
 /// What the skeleton was built from, for reports.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct SkeletonStats {
     pub points: usize,
     pub spacing: f64,

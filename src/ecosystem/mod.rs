@@ -3,6 +3,9 @@
 //! a few master plants chosen by approximate instancing (vector quantization of the plants'
 //! parameters). A scene is a JSON file next to the master plants' glb files; `flythrough`
 //! renders it with LOD selection, frustum culling and instanced draws.
+//!
+//! Takes plant assets and scene options; returns an [`EcosystemScene`] (terrain, instances,
+//! masters), written as a folder by [`folder`], and fly-through frames with their timings.
 
 pub mod flythrough;
 pub mod folder;

@@ -6,6 +6,10 @@
 //! [`Command`]; applying one records how to undo and redo it exactly. A project file
 //! ([`project`]) stores the input's location and the command history; reopening it replays
 //! the history and yields the same state.
+//!
+//! Takes a scene and its automatic segmentation ([`Session::new`]) and commands; returns the
+//! current labels, branches and boundaries as the pipeline's [`PlantState`](crate::pipeline::PlantState)
+//! ([`Session::plant_state`]).
 
 pub mod branches;
 pub mod command;

@@ -9,6 +9,8 @@
 //! the prediction was made by real COLMAP (another gauge), it is first aligned by a similarity
 //! from matched camera centres (Umeyama) and each point takes the label of the nearest ground-
 //! truth surface sample.
+//!
+//! Takes a synthetic dataset's `gt/` and a reconstruction folder; returns an [`EvalReport`].
 
 pub mod align;
 pub mod dense;

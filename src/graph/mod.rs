@@ -6,6 +6,9 @@
 //! largest colour gradient crossed by the edge's projection over the common views. Edges with
 //! `d3D ≥ kσ3D` or `d2D ≥ kσ2D` are cut (weight 0): the threshold partition. The components are
 //! then split by recursive normalized cuts ([`ncut`]).
+//!
+//! Takes a [`points::PointSet`] (positions, colours, views) and the views' gradient images;
+//! returns a [`PointGraph`] and its partition.
 
 pub mod components;
 pub mod gradient;

@@ -4,7 +4,7 @@
 //! toward the points, and texture from the best view.
 
 use nalgebra::{Matrix2, Matrix3, Point2, Point3, Vector2, Vector3};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::template::LeafTemplate;
 use crate::graph::shape::Shape;
@@ -14,7 +14,7 @@ use crate::util::polygon::{inside_polygon, polygon_area};
 use crate::util::stats::quantile;
 
 /// Fitting settings.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LeafFitOptions {
     /// Register the outline to the image boundary (affine ICP).
     pub use_boundary: bool,
@@ -285,7 +285,7 @@ fn closest_on_loop(p: &Point2<f64>, polygon: &[Point2<f64>]) -> Point2<f64> {
 }
 
 /// Outcome of the boundary registration.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct IcpReport {
     pub iterations: usize,
     /// Mean symmetric distance between the warped outline and the boundary, relative to the

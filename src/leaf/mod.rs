@@ -15,7 +15,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::time::Instant;
 
 use nalgebra::{Point2, Point3};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 pub use fit::{
     BoundaryView, FitError, FittedLeaf, LeafFitOptions, PlantContext, fit_leaf, leaf_frame,
@@ -52,7 +52,7 @@ pub struct TemplateSource {
 }
 
 /// Settings of the leaf stage.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct LeafOptions {
     pub fit: LeafFitOptions,
     /// The user's sample leaf; `None` chooses one automatically.
@@ -61,7 +61,7 @@ pub struct LeafOptions {
 
 /// The user's choice of generic leaf: a segment, and optionally the view to take it from
 /// (default: the segment's chosen boundary view).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct TemplatePick {
     pub segment: u32,
     pub view: Option<usize>,
@@ -78,7 +78,7 @@ pub struct ReconstructedLeaf {
 }
 
 /// A leaf segment that got no leaf, and why.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct SkippedLeaf {
     pub segment: u32,
     pub points: usize,
@@ -88,7 +88,7 @@ pub struct SkippedLeaf {
 }
 
 /// Seconds per stage of the leaf reconstruction.
-#[derive(Clone, Debug, Default, Serialize)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct LeafTimings {
     pub template: f64,
     pub boundaries: f64,
@@ -357,7 +357,7 @@ pub fn extract_template(
 }
 
 /// A view left out of the leaf stage because its photo cannot be used.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct UnusableView {
     pub view: usize,
     pub image_id: u32,

@@ -1,5 +1,8 @@
 //! Levels of detail for reconstructed plants (seeds 000, 002, 003): simplified levels,
 //! screen-space-error selection.
+//!
+//! Takes a plant model (or glb); returns its levels (simplified meshes and a star billboard)
+//! with their measured errors μ and switch distances, written as glTF with MSFT_lod.
 
 pub mod asset;
 pub mod billboard;

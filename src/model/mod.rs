@@ -1,6 +1,9 @@
 //! The plant model (seed 004 §6–7): reconstructed leaves and branches with their meshes and
 //! textures, and its exports. The glTF binary export is the evaluation contract: nodes
 //! `leaf_NNN` and `branch_NNN` with identity transforms, positions in the input's world frame.
+//!
+//! Takes leaf meshes with textures and branch meshes ([`PlantModel`]); returns the files
+//! written and their counts ([`ExportReport`]).
 
 pub mod gltf;
 pub mod plant;

@@ -9,6 +9,9 @@
 //! with and merges them on a voxel grid. The result is written as a dense workspace that
 //! `frond reconstruct` reads: `sparse/` (cameras, poses and the fused points with tracks),
 //! `images/`, `fused.ply` + `fused.ply.vis` (COLMAP's formats) and `densify.json`.
+//!
+//! Takes a [`Scene`](crate::scene::Scene) with a sparse model and its photos; returns
+//! [`FusedPoints`] and a [`DensifyReport`], and writes the dense workspace.
 
 pub mod fusion;
 pub mod pairs;

@@ -7,7 +7,7 @@
 //! by SfM's points, which cluster on texture. Takes a scene; returns a [`PointDensity`] with
 //! the decision.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::graph::neighbours::Neighbours;
 use crate::graph::points::PointSet;
@@ -29,7 +29,7 @@ const NEIGHBOURS: usize = 8;
 const SAMPLES: usize = 20_000;
 
 /// How densely a scene's points sample its surfaces, and what follows.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PointDensity {
     pub points: usize,
     /// Median sample spacing in pixel footprints (NaN without enough points seen by a

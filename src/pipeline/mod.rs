@@ -18,7 +18,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::branch::BranchTree;
 use crate::branch::attach::{Attachment, PosedKind, attach_leaves};
@@ -117,7 +117,7 @@ impl Default for InputOptions {
 }
 
 /// What [`open_input`] did to make a scene of the input.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ScenePreparation {
     /// The folder given.
     pub given: PathBuf,
@@ -220,7 +220,18 @@ pub fn open_scene(
         return Ok((scene, preparation));
     }
     let workspace = out.join("dense");
-    let (_, points) = densify_workspace(&scene, &options.densify, &workspace, progress)?;
+    let points = match densify_workspace(&scene, &options.densify, &workspace, progress) {
+        Ok((_, points)) => points,
+        // Stereo that cannot run on these views leaves the points as they are, as before.
+        Err(PipelineError::Mvs(e)) => {
+            preparation.note = format!(
+                "{spacing}, too sparse for the leaf graph, but densifying failed ({e}): segmented as they are"
+            );
+            tracing::warn!("{}", preparation.note);
+            return Ok((scene, preparation));
+        }
+        Err(e) => return Err(e),
+    };
     preparation.note = format!(
         "{spacing}, too sparse for the leaf graph (over {}): densified into {} ({points} points)",
         density.threshold_footprints,
@@ -425,7 +436,7 @@ pub const STAGES: [&str; 7] = [
 ];
 
 /// Output counts of a reconstruction.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ReportCounts {
     pub points: usize,
     /// Points per foreground class.
@@ -441,15 +452,78 @@ pub struct ReportCounts {
     pub atlas_pages: usize,
 }
 
+/// A petiole in the report.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PetioleRecord {
+    /// The leaf (segment id).
+    pub leaf: u32,
+    pub branch: u32,
+    pub parent_fraction: f64,
+    pub length: f64,
+}
+
+/// A posed (synthesized) leaf in the report.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PosedRecord {
+    pub kind: PosedKind,
+    /// The segment (small segments) or the branch (tips).
+    pub source: u32,
+    pub branch: u32,
+    pub base: [f64; 3],
+    pub tip: [f64; 3],
+    pub length: f64,
+}
+
+/// How the leaves were attached, as the report holds it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AttachmentRecord {
+    pub petioles: Vec<PetioleRecord>,
+    pub posed: Vec<PosedRecord>,
+    pub average: Option<crate::branch::attach::AverageLeaf>,
+    /// Leaves whose base already touches a branch.
+    pub touching: usize,
+}
+
+impl AttachmentRecord {
+    fn of(attachment: &Attachment) -> Self {
+        Self {
+            petioles: attachment
+                .petioles
+                .iter()
+                .map(|p| PetioleRecord {
+                    leaf: p.leaf,
+                    branch: p.branch,
+                    parent_fraction: p.parent_fraction,
+                    length: p.length,
+                })
+                .collect(),
+            posed: attachment
+                .posed
+                .iter()
+                .map(|p| PosedRecord {
+                    kind: p.kind,
+                    source: p.source,
+                    branch: p.branch,
+                    base: p.base,
+                    tip: p.tip,
+                    length: p.length,
+                })
+                .collect(),
+            average: attachment.average,
+            touching: attachment.touching,
+        }
+    }
+}
+
 /// The generic leaf's source, by COLMAP image id.
-#[derive(Clone, Copy, Debug, Serialize)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
 pub struct TemplateRecord {
     pub segment: u32,
     pub image_id: u32,
 }
 
 /// One fitted leaf in the report.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct LeafRecord {
     pub segment: u32,
     /// The COLMAP image its boundary and texture come from.
@@ -468,14 +542,14 @@ pub struct LeafRecord {
 }
 
 /// The parameters a reconstruction ran with.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ReportParameters {
     pub segmentation: SegmentOptions,
     pub leaves: LeafOptions,
 }
 
 /// Seconds per stage (`total` is their sum, segmentation included).
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ReportTimings {
     pub leaves: LeafTimings,
     pub skeleton: f64,
@@ -489,7 +563,7 @@ pub const REPORT_FORMAT: &str = "frond report";
 pub const REPORT_VERSION: u32 = 2;
 
 /// `report.json`: what a reconstruction did (see the README's format section).
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ReconstructionReport {
     pub format: String,
     pub version: u32,
@@ -505,7 +579,7 @@ pub struct ReconstructionReport {
     pub skeleton: Option<SkeletonStats>,
     /// Why there is no automatic skeleton, when there is none.
     pub skeleton_error: Option<String>,
-    pub attachment: Attachment,
+    pub attachment: AttachmentRecord,
     pub template: Option<TemplateRecord>,
     pub skipped: Vec<SkippedLeaf>,
     pub unusable_views: Vec<UnusableView>,
@@ -522,6 +596,28 @@ fn output_error(path: &Path, message: impl std::fmt::Display) -> PipelineError {
     PipelineError::Output {
         path: path.to_path_buf(),
         message: message.to_string(),
+    }
+}
+
+impl ReconstructionReport {
+    /// Reads and checks a `report.json` (this format and version only).
+    pub fn read(path: &Path) -> Result<Self, PipelineError> {
+        let text = std::fs::read_to_string(path).map_err(|e| output_error(path, e))?;
+        let value: serde_json::Value = serde_json::from_str(&text)
+            .map_err(|e| output_error(path, format!("not JSON: {e}")))?;
+        if value.get("format").and_then(|f| f.as_str()) != Some(REPORT_FORMAT) {
+            return Err(output_error(path, "not a Frond report"));
+        }
+        let version = value.get("version").and_then(|v| v.as_u64()).unwrap_or(0);
+        if version != REPORT_VERSION as u64 {
+            return Err(output_error(
+                path,
+                format!(
+                    "report version {version} is not supported (this Frond reads {REPORT_VERSION})"
+                ),
+            ));
+        }
+        serde_json::from_value(value).map_err(|e| output_error(path, format!("malformed: {e}")))
     }
 }
 
@@ -603,7 +699,7 @@ pub fn write_plant(
         },
         skeleton: state.skeleton.stats.clone(),
         skeleton_error: state.skeleton.error.clone(),
-        attachment,
+        attachment: AttachmentRecord::of(&attachment),
         template: leaves.template_source.and_then(|t| {
             Some(TemplateRecord {
                 segment: t.segment,

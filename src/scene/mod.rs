@@ -5,6 +5,9 @@
 //! `sparse/0/` or `sparse/`), an undistorted `dense/0/` workspace, a bare model folder, or an
 //! explicit model and images folder. Images are loaded lazily through OpenCV and checked
 //! against their camera's size.
+//!
+//! Takes a folder (or explicit model and images folders); returns a [`Scene`]. Writes COLMAP
+//! models in both formats.
 
 pub mod camera;
 pub mod dense;

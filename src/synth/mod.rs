@@ -2,6 +2,9 @@
 //! on. A procedural plant (seed 004 §8's plant types as presets) is rendered from the views a
 //! user would take, turned into the COLMAP project a user would have, and stored with the truth
 //! (per-point leaf ids and parts, leaf meshes, branch skeletons, per-view leaf masks).
+//!
+//! Takes a preset, a seed and capture options; returns a plant with its truth and writes the
+//! dataset folder.
 
 pub mod dataset;
 pub mod leaf;

@@ -1,5 +1,7 @@
 //! Small shared utilities: atomic file output, deterministic random numbers, polygons,
 //! order statistics, small geometric solvers.
+//!
+//! Each takes and returns plain values; none knows about plants.
 
 pub mod atomic;
 pub mod geometry;
