@@ -892,7 +892,7 @@ impl FrondApp {
         };
         if phase == 0 {
             if let Some(orbit) = self.view3d.orbit.as_mut() {
-                orbit.rotate(egui::vec2(4.0, 0.0));
+                orbit.rotate(4.0, 0.0);
             }
         } else if phase == 1
             && benchmark

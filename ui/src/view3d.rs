@@ -18,13 +18,13 @@ use eframe::egui_wgpu::{self, CallbackResources, CallbackTrait, RenderState};
 use eframe::wgpu;
 use egui::{Color32, Sense};
 use frond::branch::handles::{HandlePick, project_branches};
-use frond::branch::{CylinderMeshing, any_perpendicular};
+use frond::branch::CylinderMeshing;
 use frond::mesh::TriMesh;
-use frond::render::{GpuScene, Lighting, MeshHandle, Renderer, TextureHandle, ViewCamera};
+use frond::render::{GpuScene, Lighting, MeshHandle, Orbit, Renderer, TextureHandle, ViewCamera};
 use frond::scene::PhotoView;
 use frond::segment::foreground::PointClass;
 use image::RgbaImage;
-use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::Point3;
 
 use crate::image_view::{Action, segment_color};
 use crate::tools::{Tool, grab_handle, release_handle};
@@ -105,128 +105,32 @@ impl Show3d {
 const SETTLE_SECONDS: f64 = 0.25;
 /// Control points are grabbed within this distance (screen points).
 const GRAB_DISTANCE_PX: f64 = 12.0;
-/// Vertical field of view of the 3D panel.
-const FIELD_OF_VIEW_DEG: f64 = 45.0;
 /// Background (linear RGB).
 const BACKGROUND: [f64; 4] = [0.045, 0.05, 0.06, 1.0];
 
-/// An orbit camera about a target, with the plant's up direction.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Orbit {
-    pub target: Point3<f64>,
-    pub up: Vector3<f64>,
-    /// Azimuth and elevation (radians) of the eye seen from the target.
-    pub yaw: f64,
-    pub pitch: f64,
-    pub distance: f64,
+/// The plant's points to frame: the foreground's plant class, else every point.
+fn framed_points(workspace: &Workspace) -> Vec<Point3<f64>> {
+    let segmentation = workspace.session.segmentation();
+    let points = &segmentation.points.positions;
+    let plant: Vec<Point3<f64>> = points
+        .iter()
+        .zip(&segmentation.foreground.class)
+        .filter(|(_, c)| **c == PointClass::Plant)
+        .map(|(p, _)| *p)
+        .collect();
+    if plant.len() >= 3 {
+        plant
+    } else {
+        points.clone()
+    }
 }
 
-impl Orbit {
-    /// Frames the plant's points (the foreground's plant class, else every point).
-    pub fn frame(workspace: &Workspace) -> Option<Self> {
-        let segmentation = workspace.session.segmentation();
-        let points = &segmentation.points.positions;
-        let plant: Vec<&Point3<f64>> = points
-            .iter()
-            .zip(&segmentation.foreground.class)
-            .filter(|(_, c)| **c == PointClass::Plant)
-            .map(|(p, _)| p)
-            .collect();
-        let chosen: Vec<&Point3<f64>> = if plant.len() >= 3 {
-            plant
-        } else {
-            points.iter().collect()
-        };
-        if chosen.is_empty() {
-            return None;
-        }
-        let n = chosen.len() as f64;
-        let target = Point3::from(chosen.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / n);
-        let mut distances: Vec<f64> = chosen.iter().map(|p| (*p - target).norm()).collect();
-        distances.sort_by(f64::total_cmp);
-        let radius = distances[(distances.len() - 1) * 95 / 100].max(1e-6);
-        let up = segmentation
-            .foreground
-            .up
-            .try_normalize(1e-12)
-            .unwrap_or(Vector3::z());
-        Some(Self {
-            target,
-            up,
-            yaw: 0.6,
-            pitch: 0.35,
-            distance: radius / (FIELD_OF_VIEW_DEG.to_radians() * 0.5).tan() * 1.3,
-        })
-    }
-
-    /// The eye position.
-    pub fn eye(&self) -> Point3<f64> {
-        let e1 = any_perpendicular(&self.up).normalize();
-        let e2 = self.up.cross(&e1);
-        let direction = (e1 * self.yaw.cos() + e2 * self.yaw.sin()) * self.pitch.cos()
-            + self.up * self.pitch.sin();
-        self.target + direction * self.distance
-    }
-
-    /// `camera_from_world` with COLMAP's axes (x right, y down, z forward).
-    pub fn camera_from_world(&self) -> Isometry3<f64> {
-        let eye = self.eye();
-        let z = (self.target - eye).normalize();
-        let up_across = self.up - z * self.up.dot(&z);
-        let y = -up_across
-            .try_normalize(1e-12)
-            .unwrap_or_else(|| any_perpendicular(&z));
-        let x = y.cross(&z);
-        let rotation = Rotation3::from_matrix_unchecked(Matrix3::from_rows(&[
-            x.transpose(),
-            y.transpose(),
-            z.transpose(),
-        ]));
-        let translation = -(rotation * eye.coords);
-        Isometry3::from_parts(
-            Translation3::from(translation),
-            UnitQuaternion::from_rotation_matrix(&rotation),
-        )
-    }
-
-    /// The render core's camera for a panel of `width` × `height` pixels.
-    pub fn view_camera(&self, width: u32, height: u32) -> ViewCamera {
-        // The field of view spans the panel's shorter side.
-        let focal = width.min(height) as f64 * 0.5 / (FIELD_OF_VIEW_DEG.to_radians() * 0.5).tan();
-        ViewCamera {
-            width,
-            height,
-            fx: focal,
-            fy: focal,
-            cx: width as f64 * 0.5,
-            cy: height as f64 * 0.5,
-            camera_from_world: self.camera_from_world(),
-            near: self.distance * 0.01,
-            far: self.distance * 20.0,
-        }
-    }
-
-    /// Orbits by screen deltas (points).
-    pub fn rotate(&mut self, delta: egui::Vec2) {
-        self.yaw -= delta.x as f64 * 0.008;
-        self.pitch = (self.pitch + delta.y as f64 * 0.008).clamp(-1.5, 1.5);
-    }
-
-    /// Pans the target by screen deltas (points) in a panel whose shorter side is `side`
-    /// points.
-    pub fn pan(&mut self, delta: egui::Vec2, side: f32) {
-        let camera = self.camera_from_world();
-        let rotation = camera.rotation.inverse();
-        let world_per_point =
-            2.0 * self.distance * (FIELD_OF_VIEW_DEG.to_radians() * 0.5).tan() / side as f64;
-        let right = rotation * Vector3::x();
-        let down = rotation * Vector3::y();
-        self.target -= (right * delta.x as f64 + down * delta.y as f64) * world_per_point;
-    }
-
-    pub fn zoom(&mut self, factor: f64) {
-        self.distance = (self.distance / factor).max(1e-6);
-    }
+/// The orbit framing the open plant.
+fn frame_orbit(workspace: &Workspace) -> Option<Orbit> {
+    Orbit::framing(
+        &framed_points(workspace),
+        &workspace.session.segmentation().foreground.up,
+    )
 }
 
 /// What the 3D panel draws, in the world frame, ready to upload.
@@ -752,10 +656,8 @@ impl View3d {
             workspace.leaves.as_ref().map_or(u64::MAX, |(r, _)| *r),
         );
         if self.orbit.is_none() {
-            self.orbit = Orbit::frame(workspace);
-            self.extent = self.orbit.map_or(1.0, |o| {
-                o.distance * (FIELD_OF_VIEW_DEG.to_radians() * 0.5).tan()
-            });
+            self.orbit = frame_orbit(workspace);
+            self.extent = self.orbit.map_or(1.0, |o| o.half_height_at_target());
         }
         match &self.data {
             Some(data) if data.key == key => Arc::clone(data),
@@ -861,12 +763,19 @@ impl View3d {
         let rect = response.rect;
         let drag_tool = matches!(tool, Tool::DrawBranch | Tool::MoveBranch | Tool::Radius);
         if response.dragged_by(egui::PointerButton::Primary) && !drag_tool {
-            orbit.rotate(response.drag_delta());
+            orbit.rotate(
+                response.drag_delta().x as f64,
+                response.drag_delta().y as f64,
+            );
         }
         if response.dragged_by(egui::PointerButton::Secondary)
             || response.dragged_by(egui::PointerButton::Middle)
         {
-            orbit.pan(response.drag_delta(), rect.width().min(rect.height()));
+            orbit.pan(
+                response.drag_delta().x as f64,
+                response.drag_delta().y as f64,
+                rect.width().min(rect.height()) as f64,
+            );
         }
         if response.hovered() {
             let (scroll, pinch) = ui.input(|i| (i.smooth_scroll_delta.y, i.zoom_delta()));
@@ -876,7 +785,7 @@ impl View3d {
             }
         }
         if response.double_clicked() {
-            self.orbit = Orbit::frame(workspace);
+            self.orbit = frame_orbit(workspace);
         }
     }
 
@@ -1007,56 +916,6 @@ impl View3d {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn orbit() -> Orbit {
-        Orbit {
-            target: Point3::new(1.0, 2.0, 3.0),
-            up: Vector3::z(),
-            yaw: 0.3,
-            pitch: 0.4,
-            distance: 2.0,
-        }
-    }
-
-    #[test]
-    fn the_orbit_camera_looks_at_its_target_with_up_on_screen_up() {
-        let orbit = orbit();
-        let camera = orbit.view_camera(640, 480);
-        let (uv, depth) = camera.project(&orbit.target).unwrap();
-        assert!(
-            (uv.x - 320.0).abs() < 1e-6 && (uv.y - 240.0).abs() < 1e-6,
-            "{uv:?}"
-        );
-        assert!((depth - 2.0).abs() < 1e-9);
-        // A point above the target projects above the centre (smaller v).
-        let (above, _) = camera
-            .project(&(orbit.target + Vector3::z() * 0.1))
-            .unwrap();
-        assert!(
-            above.y < 240.0 && (above.x - 320.0).abs() < 1e-6,
-            "{above:?}"
-        );
-        assert!((orbit.eye() - orbit.target).norm() - 2.0 < 1e-12);
-    }
-
-    #[test]
-    fn panning_moves_the_target_across_the_view_and_zoom_keeps_it() {
-        let mut orbit = orbit();
-        let before = orbit.view_camera(640, 480);
-        orbit.pan(egui::vec2(10.0, 0.0), 480.0);
-        // The old target now appears 10 points to the right of the centre.
-        let (uv, _) = orbit
-            .view_camera(640, 480)
-            .project(&Point3::new(1.0, 2.0, 3.0))
-            .unwrap();
-        assert!(
-            (uv.x - 330.0).abs() < 1e-6 && (uv.y - 240.0).abs() < 1e-6,
-            "{uv:?}"
-        );
-        orbit.zoom(2.0);
-        assert!((orbit.distance - 1.0).abs() < 1e-12);
-        assert_ne!(before, orbit.view_camera(640, 480));
-    }
 
     #[test]
     fn palette_entries_are_distinct_texel_centres() {
