@@ -35,6 +35,18 @@ fn run_chain(root: &Path) {
         .success();
 }
 
+/// The folder holding `dataset/` and `run/`: `FROND_ROUNDTRIP` when set (scripts/roundtrip.sh),
+/// else the chain run now in `temp`.
+fn round_trip_root(temp: &Path) -> PathBuf {
+    match std::env::var_os("FROND_ROUNDTRIP") {
+        Some(dir) => PathBuf::from(dir),
+        None => {
+            run_chain(temp);
+            temp.to_path_buf()
+        }
+    }
+}
+
 #[test]
 #[ignore = "slow: COLMAP on 36 photos; run scripts/roundtrip.sh"]
 fn photos_to_plant_round_trip_meets_the_targets() {
@@ -42,13 +54,7 @@ fn photos_to_plant_round_trip_meets_the_targets() {
         return;
     }
     let temp = tempfile::tempdir().unwrap();
-    let root: PathBuf = match std::env::var_os("FROND_ROUNDTRIP") {
-        Some(dir) => PathBuf::from(dir),
-        None => {
-            run_chain(temp.path());
-            temp.path().to_path_buf()
-        }
-    };
+    let root = round_trip_root(temp.path());
     let (dataset, run) = (root.join("dataset"), root.join("run"));
     let truth = GroundTruth::load(&dataset).unwrap();
 
@@ -119,13 +125,7 @@ fn a_sparse_colmap_project_with_its_photos_is_densified_to_the_same_recall() {
         return;
     }
     let temp = tempfile::tempdir().unwrap();
-    let root: PathBuf = match std::env::var_os("FROND_ROUNDTRIP") {
-        Some(dir) => PathBuf::from(dir),
-        None => {
-            run_chain(temp.path());
-            temp.path().to_path_buf()
-        }
-    };
+    let root = round_trip_root(temp.path());
     let (dataset, run) = (root.join("dataset"), root.join("run"));
     // The sparse COLMAP project the photos gave: sparse/0 beside the photos.
     let project = temp.path().join("sparse_project");

@@ -39,6 +39,28 @@ pub(super) fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), Pip
     write_atomic(path, text.as_bytes()).map_err(|e| output_error(path, e))
 }
 
+/// Reads a JSON file of format `format` written at `version` (the only version read).
+pub(super) fn read_versioned<T: serde::de::DeserializeOwned>(
+    path: &Path,
+    format: &str,
+    version: u32,
+) -> Result<T, PipelineError> {
+    let text = std::fs::read_to_string(path).map_err(|e| output_error(path, e))?;
+    let value: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| output_error(path, format!("not JSON: {e}")))?;
+    if value.get("format").and_then(|f| f.as_str()) != Some(format) {
+        return Err(output_error(path, format!("not a {format} file")));
+    }
+    let found = value.get("version").and_then(|v| v.as_u64()).unwrap_or(0);
+    if found != version as u64 {
+        return Err(output_error(
+            path,
+            format!("{format} version {found} is not supported (this Frond reads {version})"),
+        ));
+    }
+    serde_json::from_value(value).map_err(|e| output_error(path, format!("malformed: {e}")))
+}
+
 /// `skeleton.json`: the branch tree as records with sampled centrelines.
 pub fn write_skeleton(branches: &BranchTree, out: &Path) -> Result<(), PipelineError> {
     let path = out.join(SKELETON_FILE);
@@ -140,22 +162,7 @@ impl SegmentsFile {
 
     /// Reads and checks a `segments.json`.
     pub fn read(path: &Path) -> Result<Self, PipelineError> {
-        let text = std::fs::read_to_string(path).map_err(|e| output_error(path, e))?;
-        let value: serde_json::Value = serde_json::from_str(&text)
-            .map_err(|e| output_error(path, format!("not JSON: {e}")))?;
-        if value.get("format").and_then(|f| f.as_str()) != Some(SEGMENTS_FORMAT) {
-            return Err(output_error(path, "not a Frond segments file"));
-        }
-        let version = value.get("version").and_then(|v| v.as_u64()).unwrap_or(0);
-        if version != SEGMENTS_VERSION as u64 {
-            return Err(output_error(
-                path,
-                format!(
-                    "segments version {version} is not supported (this Frond reads {SEGMENTS_VERSION})"
-                ),
-            ));
-        }
-        serde_json::from_value(value).map_err(|e| output_error(path, format!("malformed: {e}")))
+        read_versioned(path, SEGMENTS_FORMAT, SEGMENTS_VERSION)
     }
 }
 

@@ -602,22 +602,7 @@ fn output_error(path: &Path, message: impl std::fmt::Display) -> PipelineError {
 impl ReconstructionReport {
     /// Reads and checks a `report.json` (this format and version only).
     pub fn read(path: &Path) -> Result<Self, PipelineError> {
-        let text = std::fs::read_to_string(path).map_err(|e| output_error(path, e))?;
-        let value: serde_json::Value = serde_json::from_str(&text)
-            .map_err(|e| output_error(path, format!("not JSON: {e}")))?;
-        if value.get("format").and_then(|f| f.as_str()) != Some(REPORT_FORMAT) {
-            return Err(output_error(path, "not a Frond report"));
-        }
-        let version = value.get("version").and_then(|v| v.as_u64()).unwrap_or(0);
-        if version != REPORT_VERSION as u64 {
-            return Err(output_error(
-                path,
-                format!(
-                    "report version {version} is not supported (this Frond reads {REPORT_VERSION})"
-                ),
-            ));
-        }
-        serde_json::from_value(value).map_err(|e| output_error(path, format!("malformed: {e}")))
+        files::read_versioned(path, REPORT_FORMAT, REPORT_VERSION)
     }
 }
 
