@@ -10,7 +10,7 @@ use frond::eval::align_to_ground_truth;
 use frond::eval::dense::point_accuracy;
 use frond::mvs::{DensifyOptions, densify, write_workspace};
 use frond::scene::Scene;
-use frond::sfm::{SfmOptions, run_sfm};
+use frond::sfm::{Matcher, SfmError, SfmOptions, run_sfm};
 use frond::synth::{Preset, SynthOptions, write_dataset};
 use frond::util::progress::NoProgress;
 
@@ -31,6 +31,17 @@ fn colmap_then_densify_recovers_the_plant_surface() {
         ..SynthOptions::default()
     };
     write_dataset(&options, &dataset, &NoProgress).unwrap();
+    // What real folders hold besides good photos: a copy of a photo, a file that is not an
+    // image, and a photo cut off in transfer. They are named and left out before COLMAP.
+    let images = dataset.join("images");
+    std::fs::copy(
+        images.join("view_0003.png"),
+        images.join("view_0003 copy.png"),
+    )
+    .unwrap();
+    std::fs::write(images.join("notes.jpg"), b"taken on a cloudy day").unwrap();
+    let bytes = std::fs::read(images.join("view_0005.png")).unwrap();
+    std::fs::write(images.join("view_0005b.png"), &bytes[..bytes.len() / 3]).unwrap();
     let out = dir.path().join("sfm");
     // One thread: COLMAP's multithreaded matching and mapping are not reproducible, and a
     // test must see the same model on every run.
@@ -40,8 +51,24 @@ fn colmap_then_densify_recovers_the_plant_surface() {
     };
     let report = run_sfm(&dataset.join("images"), &out, &sfm_options, &NoProgress).unwrap();
     eprintln!("{report:?}");
-    assert_eq!(report.photos, 24);
+    assert_eq!(report.photos, 27);
+    let rejected: Vec<&str> = report.rejected.iter().map(|r| r.photo.as_str()).collect();
+    assert_eq!(
+        rejected,
+        ["notes.jpg", "view_0003 copy.png", "view_0005b.png"],
+        "{report:?}"
+    );
     assert!(report.registered >= 20, "{report:?}");
+    assert!(
+        report.unregistered.len() + report.registered == 24,
+        "{report:?}"
+    );
+    // Frond's matcher chose fewer pairs than all of them, and COLMAP verified most.
+    assert!(report.pairs_matched < 24 * 23 / 2, "{report:?}");
+    assert!(
+        report.pairs_verified * 2 > report.pairs_matched,
+        "{report:?}"
+    );
     assert!(out.join("sparse/0/points3D.bin").is_file());
     assert!(out.join("sfm.json").is_file());
     assert!(out.join("colmap.log").is_file());
@@ -74,4 +101,142 @@ fn colmap_then_densify_recovers_the_plant_surface() {
         accuracy.median_error_fraction_of_height <= 0.005,
         "{accuracy:?}"
     );
+}
+
+/// Three files named like photos that are not images: named before any COLMAP step (COLMAP's
+/// matcher used to abort on them).
+#[test]
+fn a_folder_of_files_that_are_not_images_is_refused_with_their_names() {
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["a.jpg", "b.png", "c.png"] {
+        std::fs::write(dir.path().join(name), format!("{name} is text")).unwrap();
+    }
+    let out = dir.path().join("out");
+    let err = run_sfm(dir.path(), &out, &SfmOptions::default(), &NoProgress).unwrap_err();
+    let message = err.to_string();
+    assert!(message.contains("0 of 3 photos are usable"), "{message}");
+    for name in ["a.jpg", "b.png", "c.png"] {
+        assert!(message.contains(name), "{message}");
+    }
+    assert!(!out.exists());
+}
+
+/// Photos that share nothing (independent noise): the mapper finds no model. The error says so,
+/// and the database, log and sfm.json are kept beside the output, which is left as it was.
+#[test]
+fn a_capture_that_breaks_keeps_its_partial_output_and_an_earlier_result() {
+    if !common::colmap_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let photos = dir.path().join("photos");
+    std::fs::create_dir(&photos).unwrap();
+    let mut rng = frond::util::rng::Rng::seed_from(3);
+    for k in 0..4 {
+        let image = image::GrayImage::from_fn(160, 120, |_, _| image::Luma([rng.below(256) as u8]));
+        image.save(photos.join(format!("noise_{k}.png"))).unwrap();
+    }
+    let out = dir.path().join("sfm");
+    std::fs::create_dir(&out).unwrap();
+    std::fs::write(out.join("earlier.txt"), "an earlier result").unwrap();
+    let options = SfmOptions {
+        threads: 1,
+        ..SfmOptions::default()
+    };
+    let err = run_sfm(&photos, &out, &options, &NoProgress).unwrap_err();
+    let message = err.to_string();
+    assert!(
+        matches!(
+            err.cause(),
+            SfmError::TooFewRegistered {
+                registered: 0,
+                total: 4
+            }
+        ),
+        "{message}"
+    );
+    let kept = dir.path().join("sfm.failed");
+    assert!(message.contains(&kept.display().to_string()), "{message}");
+    assert!(kept.join("database.db").is_file());
+    assert!(kept.join("colmap.log").is_file());
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(kept.join("sfm.json")).unwrap()).unwrap();
+    assert_eq!(json["status"], "failed");
+    assert!(
+        json["error"]
+            .as_str()
+            .unwrap()
+            .contains("registered 0 of 4")
+    );
+    assert_eq!(
+        std::fs::read_to_string(out.join("earlier.txt")).unwrap(),
+        "an earlier result"
+    );
+    // No staging folders are left behind.
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().contains("partial"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
+/// Photos of two sizes get one camera each, and both sets register.
+#[test]
+fn photos_of_two_sizes_get_a_camera_each() {
+    if !common::colmap_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let dataset = dir.path().join("dataset");
+    let options = SynthOptions {
+        preset: Preset::Broadleaf,
+        seed: 4,
+        views: 16,
+        width: 640,
+        height: 480,
+        with_points: false,
+        ..SynthOptions::default()
+    };
+    write_dataset(&options, &dataset, &NoProgress).unwrap();
+    let images = dataset.join("images");
+    // Every other photo of the second ring taken with a different camera setting (downsized).
+    for k in [9, 11, 13, 15] {
+        let path = images.join(format!("view_{k:04}.png"));
+        let photo = image::open(&path).unwrap();
+        photo
+            .resize_exact(480, 360, image::imageops::FilterType::Triangle)
+            .save(&path)
+            .unwrap();
+    }
+    let out = dir.path().join("sfm");
+    let sfm_options = SfmOptions {
+        threads: 1,
+        undistort: false,
+        matcher: Matcher::Auto,
+        ..SfmOptions::default()
+    };
+    let report = run_sfm(&images, &out, &sfm_options, &NoProgress).unwrap();
+    eprintln!("{report:?}");
+    assert_eq!(report.cameras, 2);
+    assert!(report.rejected.is_empty());
+    let scene = Scene::open(&out).unwrap();
+    assert_eq!(scene.reconstruction.cameras().len(), 2);
+    let small = scene
+        .reconstruction
+        .images()
+        .iter()
+        .filter(|i| {
+            scene
+                .reconstruction
+                .camera(i.camera_id)
+                .is_some_and(|c| c.width == 480)
+        })
+        .count();
+    assert!(
+        small >= 3,
+        "{small} downsized photos registered: {report:?}"
+    );
+    assert!(report.registered >= 14, "{report:?}");
+    assert!(!out.join("dense").exists());
 }

@@ -75,9 +75,11 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
-    /// Structure from motion by the installed COLMAP on the CPU: features, matching, mapping,
-    /// undistortion. Writes database.db, sparse/0 (the largest model), dense/ (undistorted
-    /// workspace for `frond densify`), colmap.log and sfm.json.
+    /// Structure from motion with the installed COLMAP on the CPU: photo checks, features,
+    /// pairs chosen by image retrieval and matched by Frond, COLMAP's geometric verification,
+    /// mapping, undistortion. Writes database.db, matches.txt, sparse/0 (the largest model),
+    /// dense/ (undistorted workspace for `frond densify`; --no-undistort skips it), colmap.log
+    /// and sfm.json. A failed run keeps what it made in OUT.failed.
     Sfm {
         /// Folder of photos (png, jpg, tif, bmp).
         photos: PathBuf,
@@ -262,9 +264,12 @@ enum RenderModeArg {
 
 #[derive(Clone, Copy, ValueEnum)]
 enum MatcherArg {
-    /// Exhaustive up to 60 photos, sequential beyond.
+    /// Frond's: pairs chosen by image retrieval and file-name order, matched by Frond,
+    /// verified by COLMAP.
     Auto,
+    /// COLMAP's exhaustive matcher (every pair).
     Exhaustive,
+    /// COLMAP's sequential matcher (file-name neighbours).
     Sequential,
 }
 
@@ -285,6 +290,17 @@ struct SfmArgs {
     /// Longest side of the undistorted images (0: as taken).
     #[arg(long, default_value_t = 0)]
     undistorted_size: u32,
+    /// Do not write COLMAP's undistorted workspace (dense/); `frond densify --model
+    /// OUT/sparse/0 --images PHOTOS` reads the distorted photos directly.
+    #[arg(long)]
+    no_undistort: bool,
+    /// With the auto matcher: the most similar photos matched with each photo.
+    #[arg(long, default_value_t = frond::sfm::pairs::PairOptions::default().retrieved)]
+    retrieved: usize,
+    /// With the auto matcher: neighbours on each side in file-name order matched with each
+    /// photo.
+    #[arg(long, default_value_t = frond::sfm::pairs::PairOptions::default().sequential)]
+    sequential: usize,
 }
 
 impl SfmArgs {
@@ -302,8 +318,14 @@ impl SfmArgs {
                 (None, MatcherArg::Exhaustive) => frond::sfm::Matcher::Exhaustive,
                 (None, MatcherArg::Sequential) => frond::sfm::Matcher::Sequential,
             },
+            pairs: frond::sfm::pairs::PairOptions {
+                retrieved: self.retrieved,
+                sequential: self.sequential,
+                ..Default::default()
+            },
             camera_model: self.camera_model.clone(),
             single_camera: !self.camera_per_photo,
+            undistort: !self.no_undistort,
             max_image_size: self.undistorted_size,
             ..frond::sfm::SfmOptions::default()
         })
@@ -854,6 +876,21 @@ fn print_sfm(report: &frond::sfm::SfmReport, out: &Path) {
         report.timings.values().sum::<f64>(),
         out.display()
     );
+    let timings: Vec<String> = report
+        .timings
+        .iter()
+        .map(|(step, seconds)| format!("{step} {seconds:.1} s"))
+        .collect();
+    println!(
+        "{} pairs matched, {} verified; mean reprojection error {:.2} px; {}",
+        report.pairs_matched,
+        report.pairs_verified,
+        report.mean_reprojection_error_px,
+        timings.join(", ")
+    );
+    for rejected in &report.rejected {
+        eprintln!("left out {}: {}", rejected.photo, rejected.reason);
+    }
     if !report.unregistered.is_empty() {
         eprintln!("not registered: {}", report.unregistered.join(", "));
     }

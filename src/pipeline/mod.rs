@@ -75,7 +75,8 @@ pub struct PhotosRun {
 }
 
 /// Photos to a scene: structure from motion by COLMAP into `out/sfm`, then semi-dense stereo
-/// into `out/dense` (the returned workspace).
+/// into `out/dense` (the returned workspace). COLMAP's undistortion is skipped: densify reads
+/// the photos through the model's camera, distortion included.
 pub fn photos_to_scene(
     photos: &Path,
     sfm_options: &crate::sfm::SfmOptions,
@@ -84,8 +85,18 @@ pub fn photos_to_scene(
     progress: &dyn Progress,
 ) -> Result<PhotosRun, PipelineError> {
     let sfm_out = out.join("sfm");
-    let sfm = crate::sfm::run_sfm(photos, &sfm_out, sfm_options, progress)?;
-    let scene = Scene::open(&sfm_out.join("dense"))?;
+    let sfm_options = crate::sfm::SfmOptions {
+        undistort: false,
+        ..sfm_options.clone()
+    };
+    let sfm = crate::sfm::run_sfm(photos, &sfm_out, &sfm_options, progress)?;
+    let scene = Scene::from_source(crate::scene::SceneSource {
+        layout: crate::scene::LayoutKind::Explicit,
+        model_dir: sfm_out.join("sparse").join("0"),
+        images_dir: Some(photos.to_path_buf()),
+        fused_ply: None,
+        other_models: Vec::new(),
+    })?;
     let workspace = out.join("dense");
     let (densify, dense_points) = densify_workspace(&scene, densify_options, &workspace, progress)?;
     Ok(PhotosRun {
@@ -157,6 +168,15 @@ pub fn open_input(
                 "; not registered: {}",
                 run.sfm.unregistered.join(", ")
             ));
+        }
+        if !run.sfm.rejected.is_empty() {
+            let rejected: Vec<String> = run
+                .sfm
+                .rejected
+                .iter()
+                .map(|r| format!("{} ({})", r.photo, r.reason))
+                .collect();
+            note.push_str(&format!("; left out: {}", rejected.join(", ")));
         }
         return Ok((
             scene,

@@ -1,0 +1,766 @@
+//! `frond sfm`: structure from motion with the installed COLMAP, on the CPU, made fast for
+//! captures of one plant. Steps:
+//!
+//! 1. The photos are checked ([`photos`]): unreadable, truncated and duplicate files are named
+//!    and left out; photos of one size share a camera.
+//! 2. COLMAP extracts SIFT features (once per size group).
+//! 3. Frond chooses the pairs to match by image retrieval over the capture's own visual words
+//!    plus file-name neighbours ([`pairs`]) and matches their descriptors itself with blocked
+//!    SIMD matrix products ([`matching`]; COLMAP's definition of a match, about 10× faster per
+//!    pair than its CPU matcher); COLMAP verifies the matches geometrically
+//!    (`matches_importer`). [`Matcher::Exhaustive`], [`Matcher::Sequential`] and
+//!    [`Matcher::VocabTree`] run COLMAP's own matchers instead.
+//! 4. COLMAP's incremental mapper; optionally its undistortion (Frond's densify reads distorted
+//!    photos directly, so the pipeline skips it).
+//!
+//! Writes one folder:
+//! - `database.db`, `colmap.log` (every COLMAP message), `matches.txt` (Frond's matches);
+//! - `sparse/0`: the model with the most registered images (COLMAP numbers its models by
+//!   discovery; the best is renamed to 0, the others kept as 1, 2, …);
+//! - `dense/` (with [`SfmOptions::undistort`]): COLMAP's undistorted workspace;
+//! - `sfm.json`: the photos folder, options, steps, timings, registered, unregistered and
+//!   rejected photos.
+//!
+//! The folder is assembled beside its destination and renamed into place. A run that fails
+//! after features were extracted keeps what it made in `OUT.failed` (with `sfm.json` saying
+//! why) and names that folder in its error; an earlier complete `OUT` is left as it was. Takes
+//! a folder of photos and [`SfmOptions`]; returns an [`SfmReport`].
+
+pub mod database;
+pub mod matching;
+pub mod pairs;
+pub mod photos;
+
+use std::collections::BTreeMap;
+use std::io::{BufRead, Read};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::Instant;
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::scene::{SceneError, read_model};
+use crate::util::atomic::{StagedDir, write_atomic};
+use crate::util::progress::Progress;
+use matching::{MatchOptions, match_descriptors};
+use pairs::{PairOptions, select_pairs};
+use photos::{PhotoCheck, RejectedPhoto, check_photos};
+
+/// How photos are matched.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub enum Matcher {
+    /// Frond's: pairs chosen by retrieval ([`SfmOptions::pairs`]), matched by Frond, verified
+    /// by COLMAP.
+    Auto,
+    /// COLMAP's exhaustive matcher (every pair; the reference Frond's matcher is measured
+    /// against).
+    Exhaustive,
+    /// COLMAP's sequential matcher: neighbours in file-name order (a walk around the plant).
+    Sequential,
+    /// COLMAP's vocabulary-tree matcher with this tree file (faiss or flann, as the installed
+    /// COLMAP expects).
+    VocabTree(PathBuf),
+}
+
+/// Options of an SfM run.
+#[derive(Clone, Debug, Serialize)]
+pub struct SfmOptions {
+    pub matcher: Matcher,
+    /// Which pairs [`Matcher::Auto`] matches.
+    pub pairs: PairOptions,
+    /// What [`Matcher::Auto`] counts as a match.
+    pub matching: MatchOptions,
+    /// COLMAP camera model name (SIMPLE_RADIAL, OPENCV, …).
+    pub camera_model: String,
+    /// One camera (lens and focal length) per photo size; `false`: one per photo.
+    pub single_camera: bool,
+    /// Write COLMAP's undistorted workspace (`dense/`).
+    pub undistort: bool,
+    /// Undistorted images have their longest side at most this (0: as taken).
+    pub max_image_size: u32,
+    pub threads: usize,
+    /// The `colmap` executable.
+    pub colmap: PathBuf,
+}
+
+impl Default for SfmOptions {
+    fn default() -> Self {
+        Self {
+            matcher: Matcher::Auto,
+            pairs: PairOptions::default(),
+            matching: MatchOptions::default(),
+            camera_model: "SIMPLE_RADIAL".to_owned(),
+            single_camera: true,
+            undistort: true,
+            max_image_size: 0,
+            threads: std::thread::available_parallelism().map_or(2, |n| n.get()),
+            colmap: PathBuf::from("colmap"),
+        }
+    }
+}
+
+/// Why SfM failed.
+#[derive(Debug, thiserror::Error)]
+pub enum SfmError {
+    #[error("COLMAP ('{0}') could not be started: is it installed? (scripts/setup.sh installs it)")]
+    ColmapMissing(PathBuf),
+    #[error("{path}: {message}")]
+    Photos { path: PathBuf, message: String },
+    #[error("COLMAP {step} failed ({status}); last messages:\n{log_tail}")]
+    Colmap {
+        step: String,
+        status: String,
+        log_tail: String,
+    },
+    #[error(
+        "COLMAP registered {registered} of {total} photos (need at least 3): the photos may overlap too little, be blurred, or show too little texture"
+    )]
+    TooFewRegistered { registered: usize, total: usize },
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error(transparent)]
+    Database(#[from] database::DatabaseError),
+    #[error("{path}: {message}")]
+    Output { path: PathBuf, message: String },
+    #[error("structure from motion was cancelled")]
+    Cancelled,
+    #[error("{source}\nwhat was made is kept in {kept} (sfm.json, colmap.log, database.db)")]
+    Kept {
+        source: Box<SfmError>,
+        kept: PathBuf,
+    },
+}
+
+impl SfmError {
+    /// The error itself, without where its partial output was kept.
+    pub fn cause(&self) -> &SfmError {
+        match self {
+            SfmError::Kept { source, .. } => source.cause(),
+            other => other,
+        }
+    }
+}
+
+/// What an SfM run did.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct SfmReport {
+    pub photos: usize,
+    pub matcher: String,
+    /// Photos left out before COLMAP (unreadable, truncated, duplicates).
+    pub rejected: Vec<RejectedPhoto>,
+    /// Cameras (one per photo size with a shared camera).
+    pub cameras: usize,
+    /// Pairs whose descriptors were matched (Frond's matcher; 0 for COLMAP's).
+    pub pairs_matched: usize,
+    /// Pairs with a verified two-view geometry, and their inlier matches.
+    pub pairs_verified: usize,
+    pub inlier_matches: usize,
+    pub registered: usize,
+    pub unregistered: Vec<String>,
+    pub points: usize,
+    pub models: usize,
+    pub mean_track_length: f64,
+    /// Mean over points of COLMAP's reprojection error, pixels.
+    pub mean_reprojection_error_px: f64,
+    pub timings: BTreeMap<String, f64>,
+}
+
+const PHOTO_EXTENSIONS: [&str; 6] = ["png", "jpg", "jpeg", "tif", "tiff", "bmp"];
+
+/// The photo files directly in `dir`, sorted by name.
+pub fn list_photos(dir: &Path) -> Result<Vec<PathBuf>, SfmError> {
+    let entries = std::fs::read_dir(dir).map_err(|e| SfmError::Photos {
+        path: dir.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    let mut photos: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.is_file()
+                && p.extension().is_some_and(|x| {
+                    PHOTO_EXTENSIONS.contains(&x.to_string_lossy().to_lowercase().as_str())
+                })
+        })
+        .collect();
+    photos.sort();
+    Ok(photos)
+}
+
+fn output_error(path: &Path, e: impl std::fmt::Display) -> SfmError {
+    SfmError::Output {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    }
+}
+
+fn tail(text: &str, lines: usize) -> String {
+    let all: Vec<&str> = text.lines().collect();
+    all[all.len().saturating_sub(lines)..].join("\n")
+}
+
+/// Runs one COLMAP command, appending its output to `log` and passing each line of its
+/// standard output to `on_line` as it comes (for progress).
+fn run_colmap(
+    options: &SfmOptions,
+    step: &str,
+    args: &[String],
+    log: &Path,
+    on_line: &mut dyn FnMut(&str),
+) -> Result<f64, SfmError> {
+    let started = Instant::now();
+    tracing::info!("colmap {}", args.join(" "));
+    let mut child = Command::new(&options.colmap)
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .map_err(|_| SfmError::ColmapMissing(options.colmap.clone()))?;
+    let stderr = child.stderr.take();
+    let stderr_reader = std::thread::spawn(move || {
+        let mut text = String::new();
+        if let Some(mut stderr) = stderr {
+            let _ = stderr.read_to_string(&mut text);
+        }
+        text
+    });
+    let mut text = format!("== colmap {}\n", args.join(" "));
+    if let Some(stdout) = child.stdout.take() {
+        for line in std::io::BufReader::new(stdout).lines() {
+            let Ok(line) = line else { break };
+            on_line(&line);
+            text.push_str(&line);
+            text.push('\n');
+        }
+    }
+    let status = child.wait().map_err(|e| SfmError::Colmap {
+        step: step.to_owned(),
+        status: e.to_string(),
+        log_tail: String::new(),
+    })?;
+    text.push_str(&stderr_reader.join().unwrap_or_default());
+    let mut previous = std::fs::read(log).unwrap_or_default();
+    previous.extend_from_slice(text.as_bytes());
+    write_atomic(log, &previous).map_err(|e| output_error(log, e))?;
+    if !status.success() {
+        return Err(SfmError::Colmap {
+            step: step.to_owned(),
+            status: status.to_string(),
+            log_tail: tail(&text, 15),
+        });
+    }
+    Ok(started.elapsed().as_secs_f64())
+}
+
+fn path_arg(path: &Path) -> String {
+    path.to_string_lossy().into_owned()
+}
+
+/// The number in `[k/n]` at the start of a COLMAP progress line such as
+/// `Processed file [3/36]`.
+fn bracket_count(line: &str) -> Option<u64> {
+    let inner = line.split('[').nth(1)?.split(']').next()?;
+    inner.split('/').next()?.trim().parse().ok()
+}
+
+/// Runs COLMAP on the photos in `photos` and writes `out` (see the module docs).
+pub fn run_sfm(
+    photos: &Path,
+    out: &Path,
+    options: &SfmOptions,
+    progress: &dyn Progress,
+) -> Result<SfmReport, SfmError> {
+    let files = list_photos(photos)?;
+    if files.len() < 3 {
+        return Err(SfmError::Photos {
+            path: photos.to_path_buf(),
+            message: format!(
+                "holds {} photos ({}); structure from motion needs at least 3",
+                files.len(),
+                PHOTO_EXTENSIONS.join(", ")
+            ),
+        });
+    }
+    let photos = std::fs::canonicalize(photos).map_err(|e| SfmError::Photos {
+        path: photos.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    progress.stage("checking photos", files.len() as u64);
+    let started = Instant::now();
+    let check = check_photos(&files);
+    progress.advance(files.len() as u64);
+    for rejected in &check.rejected {
+        tracing::warn!("{}: {}, left out", rejected.photo, rejected.reason);
+    }
+    if check.usable() < 3 {
+        return Err(SfmError::Photos {
+            path: photos.clone(),
+            message: format!(
+                "{} of {} photos are usable; structure from motion needs at least 3. Left out:\n{}",
+                check.usable(),
+                files.len(),
+                check.rejected_summary()
+            ),
+        });
+    }
+    let mut report = SfmReport {
+        photos: files.len(),
+        matcher: format!("{:?}", options.matcher),
+        rejected: check.rejected.clone(),
+        ..SfmReport::default()
+    };
+    report
+        .timings
+        .insert("check".into(), started.elapsed().as_secs_f64());
+    let staging = StagedDir::new(out).map_err(|e| output_error(out, e))?;
+    let root = staging.path().to_path_buf();
+    match run_steps(&photos, &check, &root, options, progress, &mut report) {
+        Ok(()) => {
+            write_sfm_json(&root, &photos, options, &report, None)?;
+            staging.commit().map_err(|e| output_error(out, e))?;
+            Ok(report)
+        }
+        Err(SfmError::Cancelled) => Err(SfmError::Cancelled),
+        Err(error) if root.join("database.db").is_file() => {
+            // Keep what was made beside the output, without touching an earlier result.
+            let kept = failed_folder(out);
+            let written = write_sfm_json(&root, &photos, options, &report, Some(&error));
+            let moved = written.and_then(|()| {
+                let failed = StagedDir::new(&kept).map_err(|e| output_error(&kept, e))?;
+                std::fs::remove_dir(failed.path()).map_err(|e| output_error(&kept, e))?;
+                std::fs::rename(&root, failed.path()).map_err(|e| output_error(&kept, e))?;
+                std::fs::create_dir(&root).map_err(|e| output_error(&root, e))?;
+                failed.commit().map_err(|e| output_error(&kept, e))
+            });
+            match moved {
+                Ok(()) => Err(SfmError::Kept {
+                    source: Box::new(error),
+                    kept,
+                }),
+                Err(e) => {
+                    tracing::warn!("could not keep the partial output: {e}");
+                    Err(error)
+                }
+            }
+        }
+        Err(error) => Err(error),
+    }
+}
+
+/// `OUT.failed` beside `OUT`.
+fn failed_folder(out: &Path) -> PathBuf {
+    let mut name = out
+        .file_name()
+        .map(|n| n.to_os_string())
+        .unwrap_or_else(|| "sfm".into());
+    name.push(".failed");
+    out.with_file_name(name)
+}
+
+fn write_sfm_json(
+    root: &Path,
+    photos: &Path,
+    options: &SfmOptions,
+    report: &SfmReport,
+    error: Option<&SfmError>,
+) -> Result<(), SfmError> {
+    let json_path = root.join("sfm.json");
+    let json = serde_json::json!({
+        "generator": concat!("frond ", env!("CARGO_PKG_VERSION")),
+        "status": if error.is_some() { "failed" } else { "done" },
+        "error": error.map(|e| e.to_string()),
+        "photos_dir": photos,
+        "options": options,
+        "report": report,
+    });
+    let text = serde_json::to_string_pretty(&json).map_err(|e| output_error(&json_path, e))?;
+    write_atomic(&json_path, text.as_bytes()).map_err(|e| output_error(&json_path, e))
+}
+
+fn check_cancelled(progress: &dyn Progress) -> Result<(), SfmError> {
+    if progress.is_cancelled() {
+        Err(SfmError::Cancelled)
+    } else {
+        Ok(())
+    }
+}
+
+/// Extraction, matching, mapping and undistortion into `root`.
+fn run_steps(
+    photos: &Path,
+    check: &PhotoCheck,
+    root: &Path,
+    options: &SfmOptions,
+    progress: &dyn Progress,
+    report: &mut SfmReport,
+) -> Result<(), SfmError> {
+    let database = root.join("database.db");
+    let log = root.join("colmap.log");
+    let threads = options.threads.max(1).to_string();
+    let s = |v: &str| v.to_owned();
+    let usable = check.usable();
+
+    // Features: one extraction per photo size, so each size gets its own shared camera.
+    progress.stage("extracting features", usable as u64);
+    let groups: Vec<Vec<String>> = if options.single_camera {
+        check.groups.iter().map(|g| g.photos.clone()).collect()
+    } else {
+        let mut all: Vec<String> = check.groups.iter().flat_map(|g| g.photos.clone()).collect();
+        all.sort();
+        vec![all]
+    };
+    report.cameras = if options.single_camera {
+        groups.len()
+    } else {
+        usable
+    };
+    if groups.len() > 1 {
+        let sizes: Vec<String> = check
+            .groups
+            .iter()
+            .map(|g| format!("{}×{} ({})", g.width, g.height, g.photos.len()))
+            .collect();
+        tracing::warn!(
+            "the photos have {} sizes: {}; each size gets its own camera",
+            sizes.len(),
+            sizes.join(", ")
+        );
+    }
+    let mut seconds = 0.0;
+    let mut done_before = 0u64;
+    for (k, group) in groups.iter().enumerate() {
+        let list = root.join(format!("photos_{k}.txt"));
+        write_atomic(&list, (group.join("\n") + "\n").as_bytes())
+            .map_err(|e| output_error(&list, e))?;
+        let extract = vec![
+            s("feature_extractor"),
+            s("--database_path"),
+            path_arg(&database),
+            s("--image_path"),
+            path_arg(photos),
+            s("--image_list_path"),
+            path_arg(&list),
+            s("--ImageReader.camera_model"),
+            options.camera_model.clone(),
+            s("--ImageReader.single_camera"),
+            s(if options.single_camera { "1" } else { "0" }),
+            s("--SiftExtraction.use_gpu"),
+            s("0"),
+            s("--SiftExtraction.num_threads"),
+            threads.clone(),
+        ];
+        let mut done = done_before;
+        seconds += run_colmap(options, "feature extraction", &extract, &log, &mut |line| {
+            if line.starts_with("Processed file") && bracket_count(line).is_some() {
+                done += 1;
+                progress.advance(1);
+            }
+        })?;
+        done_before = done;
+        check_cancelled(progress)?;
+    }
+    report.timings.insert("features".into(), seconds);
+
+    match &options.matcher {
+        Matcher::Auto => frond_matching(root, options, progress, report)?,
+        colmap_matcher => {
+            let mut matching = match colmap_matcher {
+                Matcher::Sequential => vec![s("sequential_matcher")],
+                Matcher::VocabTree(tree) => vec![
+                    s("vocab_tree_matcher"),
+                    s("--VocabTreeMatching.vocab_tree_path"),
+                    path_arg(tree),
+                ],
+                _ => vec![s("exhaustive_matcher")],
+            };
+            matching.extend([
+                s("--database_path"),
+                path_arg(&database),
+                s("--SiftMatching.use_gpu"),
+                s("0"),
+                s("--SiftMatching.num_threads"),
+                threads.clone(),
+            ]);
+            progress.stage("matching (COLMAP)", 0);
+            let seconds = run_colmap(options, "matching", &matching, &log, &mut |_| {})?;
+            report.timings.insert("matching".into(), seconds);
+            let (pairs, inliers) = database::verified_pairs(&database)?;
+            report.pairs_verified = pairs;
+            report.inlier_matches = inliers;
+        }
+    }
+    check_cancelled(progress)?;
+
+    progress.stage("mapping", usable as u64);
+    let mapped = root.join("mapped");
+    std::fs::create_dir_all(&mapped).map_err(|e| output_error(&mapped, e))?;
+    let mapper = vec![
+        s("mapper"),
+        s("--database_path"),
+        path_arg(&database),
+        s("--image_path"),
+        path_arg(photos),
+        s("--output_path"),
+        path_arg(&mapped),
+        s("--Mapper.num_threads"),
+        threads,
+    ];
+    let mut registered_so_far = 0u64;
+    let mapping = run_colmap(options, "mapping", &mapper, &log, &mut |line| {
+        if line.starts_with("Registering image #")
+            && let Some(count) = line
+                .rsplit('(')
+                .next()
+                .and_then(|c| c.trim_end_matches(')').trim().parse::<u64>().ok())
+            && count > registered_so_far
+        {
+            progress.advance(count - registered_so_far);
+            registered_so_far = count;
+        }
+    });
+    let seconds = match mapping {
+        Ok(seconds) => seconds,
+        // The mapper gives up when no image pair can start a model.
+        Err(SfmError::Colmap { log_tail, .. })
+            if log_tail.contains("failed to create sparse model") =>
+        {
+            return Err(SfmError::TooFewRegistered {
+                registered: 0,
+                total: usable,
+            });
+        }
+        Err(e) => return Err(e),
+    };
+    report.timings.insert("mapping".into(), seconds);
+    check_cancelled(progress)?;
+
+    // The model with the most registered images becomes sparse/0.
+    let mut models = Vec::new();
+    if let Ok(entries) = std::fs::read_dir(&mapped) {
+        for entry in entries.flatten() {
+            let path = entry.path();
+            if let Ok((model, _)) = read_model(&path) {
+                models.push((model.images().len(), path, model));
+            }
+        }
+    }
+    models.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
+    report.models = models.len();
+    let usable_names: Vec<&String> = check.groups.iter().flat_map(|g| &g.photos).collect();
+    let best_names: std::collections::HashSet<&str> = models
+        .first()
+        .map(|(_, _, best)| best.images().iter().map(|i| i.name.as_str()).collect())
+        .unwrap_or_default();
+    report.unregistered = usable_names
+        .iter()
+        .filter(|n| !best_names.contains(n.as_str()))
+        .map(|n| n.to_string())
+        .collect();
+    let sparse = root.join("sparse");
+    std::fs::create_dir_all(&sparse).map_err(|e| output_error(&sparse, e))?;
+    for (k, (_, path, _)) in models.iter().enumerate() {
+        let target = sparse.join(k.to_string());
+        std::fs::rename(path, &target).map_err(|e| output_error(&target, e))?;
+    }
+    std::fs::remove_dir_all(&mapped).map_err(|e| output_error(&mapped, e))?;
+    let Some((registered, _, best)) = models.first() else {
+        return Err(SfmError::TooFewRegistered {
+            registered: 0,
+            total: usable,
+        });
+    };
+    report.registered = *registered;
+    if *registered < 3 {
+        return Err(SfmError::TooFewRegistered {
+            registered: *registered,
+            total: usable,
+        });
+    }
+    if !report.unregistered.is_empty() {
+        tracing::warn!(
+            "{} of {usable} photos not registered in the main model (sparse/0): {}{}",
+            report.unregistered.len(),
+            report.unregistered.join(", "),
+            if models.len() > 1 {
+                format!("; {} smaller models kept as sparse/1…", models.len() - 1)
+            } else {
+                String::new()
+            }
+        );
+    }
+    report.points = best.points().len();
+    let tracks: usize = best.points().iter().map(|p| p.track.len()).sum();
+    report.mean_track_length = tracks as f64 / best.points().len().max(1) as f64;
+    let errors: Vec<f64> = best
+        .points()
+        .iter()
+        .map(|p| p.error)
+        .filter(|e| *e >= 0.0)
+        .collect();
+    report.mean_reprojection_error_px = errors.iter().sum::<f64>() / errors.len().max(1) as f64;
+
+    if options.undistort {
+        progress.stage("undistorting", 1);
+        let mut undistort = vec![
+            s("image_undistorter"),
+            s("--image_path"),
+            path_arg(photos),
+            s("--input_path"),
+            path_arg(&sparse.join("0")),
+            s("--output_path"),
+            path_arg(&root.join("dense")),
+            s("--output_type"),
+            s("COLMAP"),
+        ];
+        if options.max_image_size > 0 {
+            undistort.extend([s("--max_image_size"), options.max_image_size.to_string()]);
+        }
+        let seconds = run_colmap(options, "undistortion", &undistort, &log, &mut |_| {})?;
+        report.timings.insert("undistortion".into(), seconds);
+        progress.advance(1);
+    }
+    Ok(())
+}
+
+/// Frond's matching: retrieval pairs, blocked matching, COLMAP's geometric verification.
+fn frond_matching(
+    root: &Path,
+    options: &SfmOptions,
+    progress: &dyn Progress,
+    report: &mut SfmReport,
+) -> Result<(), SfmError> {
+    let database = root.join("database.db");
+    progress.stage("choosing pairs", 1);
+    let started = Instant::now();
+    let images = database::read_images(&database)?;
+    let descriptors: Vec<matching::Descriptors> =
+        images.iter().map(|i| i.descriptors.clone()).collect();
+    let pairs = select_pairs(&descriptors, &options.pairs);
+    progress.advance(1);
+    report
+        .timings
+        .insert("pairs".into(), started.elapsed().as_secs_f64());
+    tracing::info!(
+        "matching {} of {} pairs",
+        pairs.len(),
+        images.len() * images.len().saturating_sub(1) / 2
+    );
+    check_cancelled(progress)?;
+
+    progress.stage("matching pairs", pairs.len() as u64);
+    let started = Instant::now();
+    let matched: Vec<Option<Vec<(u32, u32)>>> = pairs
+        .par_iter()
+        .map(|&(i, j)| {
+            if progress.is_cancelled() {
+                return None;
+            }
+            let found = match_descriptors(&descriptors[i], &descriptors[j], &options.matching);
+            progress.advance(1);
+            Some(found)
+        })
+        .collect();
+    check_cancelled(progress)?;
+    report.pairs_matched = pairs.len();
+    // COLMAP verifies pairs with at least this many matches (its min_num_inliers).
+    const MIN_MATCHES: usize = 15;
+    let mut text = String::new();
+    let mut written = 0usize;
+    for (&(i, j), found) in pairs.iter().zip(&matched) {
+        let Some(found) = found else { continue };
+        if found.len() < MIN_MATCHES {
+            continue;
+        }
+        written += 1;
+        text.push_str(&format!("{} {}\n", images[i].name, images[j].name));
+        for (a, b) in found {
+            text.push_str(&format!("{a} {b}\n"));
+        }
+        text.push('\n');
+    }
+    let list = root.join("matches.txt");
+    write_atomic(&list, text.as_bytes()).map_err(|e| output_error(&list, e))?;
+    report
+        .timings
+        .insert("matching".into(), started.elapsed().as_secs_f64());
+
+    progress.stage("verifying pairs", written as u64);
+    let threads = options.threads.max(1).to_string();
+    let verify: Vec<String> = [
+        "matches_importer",
+        "--database_path",
+        &path_arg(&database),
+        "--match_list_path",
+        &path_arg(&list),
+        "--match_type",
+        "raw",
+        "--SiftMatching.use_gpu",
+        "0",
+        "--SiftMatching.num_threads",
+        &threads,
+    ]
+    .iter()
+    .map(|a| a.to_string())
+    .collect();
+    let seconds = run_colmap(
+        options,
+        "verification",
+        &verify,
+        &root.join("colmap.log"),
+        &mut |line| {
+            if line.contains(" - ") {
+                progress.advance(1);
+            }
+        },
+    )?;
+    report.timings.insert("verification".into(), seconds);
+    let (verified, inliers) = database::verified_pairs(&database)?;
+    report.pairs_verified = verified;
+    report.inlier_matches = inliers;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::util::progress::NoProgress;
+
+    #[test]
+    fn photos_are_listed_by_extension_and_too_few_is_a_clear_error() {
+        let dir = tempfile::tempdir().unwrap();
+        for name in ["b.PNG", "a.jpg", "notes.txt", "c.tiff"] {
+            std::fs::write(dir.path().join(name), b"x").unwrap();
+        }
+        std::fs::create_dir(dir.path().join("sub.png")).unwrap();
+        let photos = list_photos(dir.path()).unwrap();
+        let names: Vec<_> = photos
+            .iter()
+            .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(names, ["a.jpg", "b.PNG", "c.tiff"]);
+        std::fs::remove_file(dir.path().join("c.tiff")).unwrap();
+        let out = dir.path().join("out");
+        let err = run_sfm(dir.path(), &out, &SfmOptions::default(), &NoProgress).unwrap_err();
+        assert!(err.to_string().contains("holds 2 photos"), "{err}");
+        assert!(!out.exists());
+    }
+
+    #[test]
+    fn a_missing_colmap_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        for k in 0..3u8 {
+            image::GrayImage::from_fn(32, 32, |x, y| image::Luma([k * 50 + (x ^ y) as u8]))
+                .save(dir.path().join(format!("{k}.png")))
+                .unwrap();
+        }
+        let options = SfmOptions {
+            colmap: PathBuf::from("/nonexistent/colmap"),
+            ..SfmOptions::default()
+        };
+        let out = dir.path().join("out");
+        let err = run_sfm(dir.path(), &out, &options, &NoProgress).unwrap_err();
+        assert!(matches!(err, SfmError::ColmapMissing(_)), "{err}");
+        assert!(!out.exists(), "a failed run leaves no output");
+    }
+}
