@@ -24,6 +24,8 @@ pub struct DatabaseImage {
     pub name: String,
     pub camera_id: u32,
     pub descriptors: Descriptors,
+    /// Each feature's scale in pixels (empty when the keypoints carry no shape).
+    pub scales: Vec<f32>,
 }
 
 fn error(path: &Path, message: impl std::fmt::Display) -> DatabaseError {
@@ -41,8 +43,10 @@ pub fn read_images(path: &Path) -> Result<Vec<DatabaseImage>, DatabaseError> {
     let mut statement = db
         .prepare(
             "SELECT images.image_id, images.name, images.camera_id, \
-             descriptors.rows, descriptors.cols, descriptors.data \
-             FROM images LEFT JOIN descriptors ON images.image_id = descriptors.image_id",
+             descriptors.rows, descriptors.cols, descriptors.data, \
+             keypoints.rows, keypoints.cols, keypoints.data \
+             FROM images LEFT JOIN descriptors ON images.image_id = descriptors.image_id \
+             LEFT JOIN keypoints ON images.image_id = keypoints.image_id",
         )
         .map_err(|e| error(path, e))?;
     let rows = statement
@@ -54,12 +58,16 @@ pub fn read_images(path: &Path) -> Result<Vec<DatabaseImage>, DatabaseError> {
                 row.get::<_, Option<i64>>(3)?,
                 row.get::<_, Option<i64>>(4)?,
                 row.get::<_, Option<Vec<u8>>>(5)?,
+                row.get::<_, Option<i64>>(6)?,
+                row.get::<_, Option<i64>>(7)?,
+                row.get::<_, Option<Vec<u8>>>(8)?,
             ))
         })
         .map_err(|e| error(path, e))?;
     let mut images = Vec::new();
     for row in rows {
-        let (image_id, name, camera_id, count, columns, data) = row.map_err(|e| error(path, e))?;
+        let (image_id, name, camera_id, count, columns, data, key_rows, key_columns, key_data) =
+            row.map_err(|e| error(path, e))?;
         let record = |message: String| error(path, format!("image {image_id} ({name}): {message}"));
         let image_id = u32::try_from(image_id).map_err(|_| record("bad image id".into()))?;
         let camera_id = u32::try_from(camera_id).map_err(|_| record("bad camera id".into()))?;
@@ -75,15 +83,60 @@ pub fn read_images(path: &Path) -> Result<Vec<DatabaseImage>, DatabaseError> {
             }
             _ => Descriptors::default(),
         };
+        let scales = match (key_rows, key_columns, key_data) {
+            (Some(rows), Some(columns), Some(data)) => {
+                keypoint_scales(&data, rows, columns).map_err(record)?
+            }
+            _ => Vec::new(),
+        };
+        if !scales.is_empty() && scales.len() != descriptors.len() {
+            return Err(record(format!(
+                "{} keypoints but {} descriptors",
+                scales.len(),
+                descriptors.len()
+            )));
+        }
         images.push(DatabaseImage {
             image_id,
             name,
             camera_id,
             descriptors,
+            scales,
         });
     }
     images.sort_by(|a, b| a.name.cmp(&b.name));
     Ok(images)
+}
+
+/// Feature scales from COLMAP's keypoint blob (`f32` rows of x, y and then scale and
+/// orientation, or the affine shape a11, a12, a21, a22, whose scale is the mean length of its
+/// columns); empty for bare points (2 columns).
+fn keypoint_scales(bytes: &[u8], rows: i64, columns: i64) -> Result<Vec<f32>, String> {
+    let rows = usize::try_from(rows).map_err(|_| "bad keypoint row count".to_owned())?;
+    let columns = usize::try_from(columns).map_err(|_| "bad keypoint column count".to_owned())?;
+    if !matches!(columns, 2 | 4 | 6) || bytes.len() != rows * columns * 4 {
+        return Err(format!(
+            "keypoint blob of {} bytes for {rows} × {columns} floats",
+            bytes.len()
+        ));
+    }
+    if columns == 2 {
+        return Ok(Vec::new());
+    }
+    let values: Vec<f32> = bytes
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    Ok(values
+        .chunks_exact(columns)
+        .map(|k| {
+            if columns == 4 {
+                k[2]
+            } else {
+                0.5 * ((k[2] * k[2] + k[4] * k[4]).sqrt() + (k[3] * k[3] + k[5] * k[5]).sqrt())
+            }
+        })
+        .collect())
 }
 
 /// Verified two-view geometries in the database: (pairs with inliers, inlier matches).
@@ -110,6 +163,7 @@ mod tests {
         db.execute_batch(
             "CREATE TABLE images (image_id INTEGER PRIMARY KEY, name TEXT NOT NULL UNIQUE, camera_id INTEGER NOT NULL);
              CREATE TABLE descriptors (image_id INTEGER PRIMARY KEY NOT NULL, rows INTEGER NOT NULL, cols INTEGER NOT NULL, data BLOB);
+             CREATE TABLE keypoints (image_id INTEGER PRIMARY KEY NOT NULL, rows INTEGER NOT NULL, cols INTEGER NOT NULL, data BLOB);
              CREATE TABLE two_view_geometries (pair_id INTEGER PRIMARY KEY NOT NULL, rows INTEGER NOT NULL, cols INTEGER NOT NULL, data BLOB);",
         )
         .unwrap();
@@ -124,6 +178,19 @@ mod tests {
             db.execute(
                 "INSERT INTO descriptors VALUES (?1, ?2, 128, ?3)",
                 rusqlite::params![id, rows.len() as i64, data],
+            )
+            .unwrap();
+            // Affine shapes: feature k has scale k + 1.
+            let keypoints: Vec<u8> = (0..rows.len())
+                .flat_map(|k| {
+                    let s = k as f32 + 1.0;
+                    [10.0, 20.0, s, 0.0, 0.0, s]
+                })
+                .flat_map(f32::to_le_bytes)
+                .collect();
+            db.execute(
+                "INSERT INTO keypoints VALUES (?1, ?2, 6, ?3)",
+                rusqlite::params![id, rows.len() as i64, keypoints],
             )
             .unwrap();
         }
@@ -144,6 +211,7 @@ mod tests {
         assert_eq!(images[0].name, "a.png");
         assert_eq!(images[0].image_id, 2);
         assert_eq!(images[1].descriptors.len(), 2);
+        assert_eq!(images[1].scales, [1.0, 2.0]);
         // Rows are unit vectors.
         let row = images[1].descriptors.row(1);
         assert!((row[5] - std::f32::consts::FRAC_1_SQRT_2).abs() < 1e-6);

@@ -42,12 +42,6 @@ impl Descriptors {
         Self { data }
     }
 
-    /// From rows that are already unit length (a concatenation of other descriptors' rows).
-    pub(crate) fn from_normalised(data: Vec<f32>) -> Self {
-        debug_assert_eq!(data.len() % DESCRIPTOR_DIM, 0);
-        Self { data }
-    }
-
     pub fn len(&self) -> usize {
         self.data.len() / DESCRIPTOR_DIM
     }
@@ -63,6 +57,15 @@ impl Descriptors {
     /// The rows, concatenated.
     pub fn as_slice(&self) -> &[f32] {
         &self.data
+    }
+
+    /// The rows at `indices`, in that order.
+    pub fn select(&self, indices: &[usize]) -> Descriptors {
+        let mut data = Vec::with_capacity(indices.len() * DESCRIPTOR_DIM);
+        for &k in indices {
+            data.extend_from_slice(self.row(k));
+        }
+        Descriptors { data }
     }
 
     /// At most `max` rows spread evenly over the features (all of them when there are fewer).

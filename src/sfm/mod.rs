@@ -156,6 +156,9 @@ pub struct SfmReport {
     /// Pairs with a verified two-view geometry, and their inlier matches.
     pub pairs_verified: usize,
     pub inlier_matches: usize,
+    /// Photos the retrieval pairs left unregistered, matched with every other photo in a
+    /// second pass (Frond's matcher).
+    pub second_pass_photos: usize,
     pub registered: usize,
     pub unregistered: Vec<String>,
     pub points: usize,
@@ -462,101 +465,64 @@ fn run_steps(
     }
     report.timings.insert("features".into(), seconds);
 
-    match &options.matcher {
-        Matcher::Auto => frond_matching(root, options, progress, report)?,
-        colmap_matcher => {
-            let mut matching = match colmap_matcher {
-                Matcher::Sequential => vec![s("sequential_matcher")],
-                Matcher::VocabTree(tree) => vec![
-                    s("vocab_tree_matcher"),
-                    s("--VocabTreeMatching.vocab_tree_path"),
-                    path_arg(tree),
-                ],
-                _ => vec![s("exhaustive_matcher")],
-            };
-            matching.extend([
-                s("--database_path"),
-                path_arg(&database),
-                s("--SiftMatching.use_gpu"),
-                s("0"),
-                s("--SiftMatching.num_threads"),
-                threads.clone(),
-            ]);
-            progress.stage("matching (COLMAP)", 0);
-            let seconds = run_colmap(options, "matching", &matching, &log, &mut |_| {})?;
-            report.timings.insert("matching".into(), seconds);
-            let (pairs, inliers) = database::verified_pairs(&database)?;
-            report.pairs_verified = pairs;
-            report.inlier_matches = inliers;
-        }
+    let mut frond = None;
+    if options.matcher == Matcher::Auto {
+        progress.stage("choosing pairs", 1);
+        let started = Instant::now();
+        let matcher = FrondMatcher::open(&database, options)?;
+        let pairs = matcher.retrieval_pairs(options);
+        progress.advance(1);
+        add_timing(report, "pairs", started.elapsed().as_secs_f64());
+        tracing::info!(
+            "matching {} of {} pairs",
+            pairs.len(),
+            usable * usable.saturating_sub(1) / 2
+        );
+        frond
+            .insert(matcher)
+            .match_and_verify(&pairs, &database, &log, options, progress, report)?;
+    } else {
+        colmap_matching(&database, &log, options, progress, report)?;
     }
     check_cancelled(progress)?;
 
-    progress.stage("mapping", usable as u64);
     let mapped = root.join("mapped");
-    std::fs::create_dir_all(&mapped).map_err(|e| output_error(&mapped, e))?;
-    let mapper = vec![
-        s("mapper"),
-        s("--database_path"),
-        path_arg(&database),
-        s("--image_path"),
-        path_arg(photos),
-        s("--output_path"),
-        path_arg(&mapped),
-        s("--Mapper.num_threads"),
-        threads,
-    ];
-    let mut registered_so_far = 0u64;
-    let mapping = run_colmap(options, "mapping", &mapper, &log, &mut |line| {
-        if line.starts_with("Registering image #")
-            && let Some(count) = line
-                .rsplit('(')
-                .next()
-                .and_then(|c| c.trim_end_matches(')').trim().parse::<u64>().ok())
-            && count > registered_so_far
-        {
-            progress.advance(count - registered_so_far);
-            registered_so_far = count;
-        }
-    });
-    let seconds = match mapping {
-        Ok(seconds) => seconds,
-        // The mapper gives up when no image pair can start a model.
-        Err(SfmError::Colmap { log_tail, .. })
-            if log_tail.contains("failed to create sparse model") =>
-        {
-            return Err(SfmError::TooFewRegistered {
-                registered: 0,
-                total: usable,
-            });
-        }
-        Err(e) => return Err(e),
+    let mut models = map(
+        photos, &database, &mapped, &log, options, progress, usable, report,
+    )?;
+    let usable_names: Vec<&String> = check.groups.iter().flat_map(|g| &g.photos).collect();
+    let unregistered = |models: &[(usize, PathBuf, crate::scene::Reconstruction)]| {
+        let registered: std::collections::HashSet<&str> = models
+            .first()
+            .map(|(_, _, best)| best.images().iter().map(|i| i.name.as_str()).collect())
+            .unwrap_or_default();
+        usable_names
+            .iter()
+            .filter(|n| !registered.contains(n.as_str()))
+            .map(|n| n.to_string())
+            .collect::<Vec<String>>()
     };
-    report.timings.insert("mapping".into(), seconds);
-    check_cancelled(progress)?;
-
-    // The model with the most registered images becomes sparse/0.
-    let mut models = Vec::new();
-    if let Ok(entries) = std::fs::read_dir(&mapped) {
-        for entry in entries.flatten() {
-            let path = entry.path();
-            if let Ok((model, _)) = read_model(&path) {
-                models.push((model.images().len(), path, model));
-            }
+    // Photos the retrieval pairs did not register are matched with every other photo, and the
+    // mapper runs again.
+    if let Some(matcher) = &mut frond {
+        let missing = unregistered(&models);
+        let pairs = matcher.pairs_with(&missing);
+        if !missing.is_empty() && !pairs.is_empty() {
+            tracing::info!(
+                "{} photos not registered: matching them with every other photo ({} more pairs)",
+                missing.len(),
+                pairs.len()
+            );
+            report.second_pass_photos = missing.len();
+            matcher.match_and_verify(&pairs, &database, &log, options, progress, report)?;
+            check_cancelled(progress)?;
+            models = map(
+                photos, &database, &mapped, &log, options, progress, usable, report,
+            )?;
         }
     }
-    models.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
     report.models = models.len();
-    let usable_names: Vec<&String> = check.groups.iter().flat_map(|g| &g.photos).collect();
-    let best_names: std::collections::HashSet<&str> = models
-        .first()
-        .map(|(_, _, best)| best.images().iter().map(|i| i.name.as_str()).collect())
-        .unwrap_or_default();
-    report.unregistered = usable_names
-        .iter()
-        .filter(|n| !best_names.contains(n.as_str()))
-        .map(|n| n.to_string())
-        .collect();
+    report.unregistered = unregistered(&models);
     let sparse = root.join("sparse");
     std::fs::create_dir_all(&sparse).map_err(|e| output_error(&sparse, e))?;
     for (k, (_, path, _)) in models.iter().enumerate() {
@@ -623,102 +589,258 @@ fn run_steps(
     Ok(())
 }
 
-/// Frond's matching: retrieval pairs, blocked matching, COLMAP's geometric verification.
-fn frond_matching(
-    root: &Path,
+/// COLMAP's incremental mapper into `mapped` (emptied first): the models it made, the one
+/// with the most registered images first (none when no pair could start a model).
+#[allow(clippy::too_many_arguments)]
+fn map(
+    photos: &Path,
+    database: &Path,
+    mapped: &Path,
+    log: &Path,
+    options: &SfmOptions,
+    progress: &dyn Progress,
+    usable: usize,
+    report: &mut SfmReport,
+) -> Result<Vec<(usize, PathBuf, crate::scene::Reconstruction)>, SfmError> {
+    progress.stage("mapping", usable as u64);
+    if mapped.exists() {
+        std::fs::remove_dir_all(mapped).map_err(|e| output_error(mapped, e))?;
+    }
+    std::fs::create_dir_all(mapped).map_err(|e| output_error(mapped, e))?;
+    let s = |v: &str| v.to_owned();
+    let mapper = vec![
+        s("mapper"),
+        s("--database_path"),
+        path_arg(database),
+        s("--image_path"),
+        path_arg(photos),
+        s("--output_path"),
+        path_arg(mapped),
+        s("--Mapper.num_threads"),
+        options.threads.max(1).to_string(),
+    ];
+    let mut registered_so_far = 0u64;
+    let mapping = run_colmap(options, "mapping", &mapper, log, &mut |line| {
+        if line.starts_with("Registering image #")
+            && let Some(count) = line
+                .rsplit('(')
+                .next()
+                .and_then(|c| c.trim_end_matches(')').trim().parse::<u64>().ok())
+            && count > registered_so_far
+        {
+            progress.advance(count - registered_so_far);
+            registered_so_far = count;
+        }
+    });
+    match mapping {
+        Ok(seconds) => add_timing(report, "mapping", seconds),
+        // The mapper gives up when no image pair can start a model.
+        Err(SfmError::Colmap { log_tail, .. })
+            if log_tail.contains("failed to create sparse model") =>
+        {
+            return Ok(Vec::new());
+        }
+        Err(e) => return Err(e),
+    }
+    check_cancelled(progress)?;
+    let mut models = Vec::new();
+    if let Ok(entries) = std::fs::read_dir(mapped) {
+        for entry in entries.flatten() {
+            let path = entry.path();
+            if let Ok((model, _)) = read_model(&path) {
+                models.push((model.images().len(), path, model));
+            }
+        }
+    }
+    models.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
+    Ok(models)
+}
+
+/// COLMAP's own matcher ([`Matcher::Exhaustive`], [`Matcher::Sequential`],
+/// [`Matcher::VocabTree`]) on the database, geometric verification included.
+fn colmap_matching(
+    database: &Path,
+    log: &Path,
     options: &SfmOptions,
     progress: &dyn Progress,
     report: &mut SfmReport,
 ) -> Result<(), SfmError> {
-    let database = root.join("database.db");
-    progress.stage("choosing pairs", 1);
-    let started = Instant::now();
-    let images = database::read_images(&database)?;
-    let descriptors: Vec<matching::Descriptors> =
-        images.iter().map(|i| i.descriptors.clone()).collect();
-    let pairs = select_pairs(&descriptors, &options.pairs);
-    progress.advance(1);
-    report
-        .timings
-        .insert("pairs".into(), started.elapsed().as_secs_f64());
-    tracing::info!(
-        "matching {} of {} pairs",
-        pairs.len(),
-        images.len() * images.len().saturating_sub(1) / 2
-    );
-    check_cancelled(progress)?;
+    let s = |v: &str| v.to_owned();
+    let mut matching = match &options.matcher {
+        Matcher::Sequential => vec![s("sequential_matcher")],
+        Matcher::VocabTree(tree) => vec![
+            s("vocab_tree_matcher"),
+            s("--VocabTreeMatching.vocab_tree_path"),
+            path_arg(tree),
+        ],
+        Matcher::Exhaustive | Matcher::Auto => vec![s("exhaustive_matcher")],
+    };
+    matching.extend([
+        s("--database_path"),
+        path_arg(database),
+        s("--SiftMatching.use_gpu"),
+        s("0"),
+        s("--SiftMatching.num_threads"),
+        options.threads.max(1).to_string(),
+    ]);
+    progress.stage("matching (COLMAP)", 0);
+    let seconds = run_colmap(options, "matching", &matching, log, &mut |_| {})?;
+    add_timing(report, "matching", seconds);
+    let (pairs, inliers) = database::verified_pairs(database)?;
+    report.pairs_verified = pairs;
+    report.inlier_matches = inliers;
+    Ok(())
+}
 
-    progress.stage("matching pairs", pairs.len() as u64);
-    let started = Instant::now();
-    let matched: Vec<Option<Vec<(u32, u32)>>> = pairs
-        .par_iter()
-        .map(|&(i, j)| {
-            if progress.is_cancelled() {
-                return None;
-            }
-            let found = match_descriptors(&descriptors[i], &descriptors[j], &options.matching);
-            progress.advance(1);
-            Some(found)
+fn add_timing(report: &mut SfmReport, step: &str, seconds: f64) {
+    *report.timings.entry(step.to_owned()).or_default() += seconds;
+}
+
+/// Frond's matcher over a COLMAP database: the photos' descriptors, the pairs matched so far.
+struct FrondMatcher {
+    images: Vec<database::DatabaseImage>,
+    matched: std::collections::BTreeSet<(usize, usize)>,
+    pool: rayon::ThreadPool,
+    passes: usize,
+}
+
+impl FrondMatcher {
+    fn open(database: &Path, options: &SfmOptions) -> Result<Self, SfmError> {
+        // As many threads as COLMAP is given.
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(options.threads.max(1))
+            .build()
+            .map_err(|e| output_error(database, format!("no threads for matching: {e}")))?;
+        Ok(Self {
+            images: database::read_images(database)?,
+            matched: Default::default(),
+            pool,
+            passes: 0,
         })
-        .collect();
-    check_cancelled(progress)?;
-    report.pairs_matched = pairs.len();
-    // COLMAP verifies pairs with at least this many matches (its min_num_inliers).
-    const MIN_MATCHES: usize = 15;
-    let mut text = String::new();
-    let mut written = 0usize;
-    for (&(i, j), found) in pairs.iter().zip(&matched) {
-        let Some(found) = found else { continue };
-        if found.len() < MIN_MATCHES {
-            continue;
-        }
-        written += 1;
-        text.push_str(&format!("{} {}\n", images[i].name, images[j].name));
-        for (a, b) in found {
-            text.push_str(&format!("{a} {b}\n"));
-        }
-        text.push('\n');
     }
-    let list = root.join("matches.txt");
-    write_atomic(&list, text.as_bytes()).map_err(|e| output_error(&list, e))?;
-    report
-        .timings
-        .insert("matching".into(), started.elapsed().as_secs_f64());
 
-    progress.stage("verifying pairs", written as u64);
-    let threads = options.threads.max(1).to_string();
-    let verify: Vec<String> = [
-        "matches_importer",
-        "--database_path",
-        &path_arg(&database),
-        "--match_list_path",
-        &path_arg(&list),
-        "--match_type",
-        "raw",
-        "--SiftMatching.use_gpu",
-        "0",
-        "--SiftMatching.num_threads",
-        &threads,
-    ]
-    .iter()
-    .map(|a| a.to_string())
-    .collect();
-    let seconds = run_colmap(
-        options,
-        "verification",
-        &verify,
-        &root.join("colmap.log"),
-        &mut |line| {
+    /// The first pass's pairs: preemptive retrieval and file-name neighbours.
+    fn retrieval_pairs(&self, options: &SfmOptions) -> Vec<(usize, usize)> {
+        let samples: Vec<matching::Descriptors> = self
+            .images
+            .iter()
+            .map(|i| {
+                pairs::preemptive_sample(
+                    &i.descriptors,
+                    &i.scales,
+                    options.pairs.preemptive_features,
+                )
+            })
+            .collect();
+        self.pool
+            .install(|| select_pairs(&samples, &options.pairs, &options.matching))
+    }
+
+    /// Every pair not matched yet that holds one of `photos`.
+    fn pairs_with(&self, photos: &[String]) -> Vec<(usize, usize)> {
+        let wanted: std::collections::HashSet<&str> = photos.iter().map(String::as_str).collect();
+        let n = self.images.len();
+        (0..n)
+            .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
+            .filter(|&(i, j)| {
+                (wanted.contains(self.images[i].name.as_str())
+                    || wanted.contains(self.images[j].name.as_str()))
+                    && !self.matched.contains(&(i, j))
+            })
+            .collect()
+    }
+
+    /// Matches `pairs`, writes them to `matches.txt` (`matches_2.txt`, … for later passes)
+    /// beside the database, and has COLMAP verify them.
+    fn match_and_verify(
+        &mut self,
+        pairs: &[(usize, usize)],
+        database: &Path,
+        log: &Path,
+        options: &SfmOptions,
+        progress: &dyn Progress,
+        report: &mut SfmReport,
+    ) -> Result<(), SfmError> {
+        self.passes += 1;
+        progress.stage("matching pairs", pairs.len() as u64);
+        let started = Instant::now();
+        let images = &self.images;
+        let matched: Vec<Option<Vec<(u32, u32)>>> = self.pool.install(|| {
+            pairs
+                .par_iter()
+                .map(|&(i, j)| {
+                    if progress.is_cancelled() {
+                        return None;
+                    }
+                    let found = match_descriptors(
+                        &images[i].descriptors,
+                        &images[j].descriptors,
+                        &options.matching,
+                    );
+                    progress.advance(1);
+                    Some(found)
+                })
+                .collect()
+        });
+        check_cancelled(progress)?;
+        self.matched.extend(pairs.iter().copied());
+        report.pairs_matched += pairs.len();
+        // COLMAP verifies pairs with at least this many matches (its min_num_inliers).
+        const MIN_MATCHES: usize = 15;
+        let mut text = String::new();
+        let mut written = 0usize;
+        for (&(i, j), found) in pairs.iter().zip(&matched) {
+            let Some(found) = found else { continue };
+            if found.len() < MIN_MATCHES {
+                continue;
+            }
+            written += 1;
+            text.push_str(&format!("{} {}\n", images[i].name, images[j].name));
+            for (a, b) in found {
+                text.push_str(&format!("{a} {b}\n"));
+            }
+            text.push('\n');
+        }
+        let name = match self.passes {
+            1 => "matches.txt".to_owned(),
+            k => format!("matches_{k}.txt"),
+        };
+        let list = database.with_file_name(name);
+        write_atomic(&list, text.as_bytes()).map_err(|e| output_error(&list, e))?;
+        add_timing(report, "matching", started.elapsed().as_secs_f64());
+        if written == 0 {
+            return Ok(());
+        }
+
+        progress.stage("verifying pairs", written as u64);
+        let threads = options.threads.max(1).to_string();
+        let verify: Vec<String> = [
+            "matches_importer",
+            "--database_path",
+            &path_arg(database),
+            "--match_list_path",
+            &path_arg(&list),
+            "--match_type",
+            "raw",
+            "--SiftMatching.use_gpu",
+            "0",
+            "--SiftMatching.num_threads",
+            &threads,
+        ]
+        .iter()
+        .map(|a| a.to_string())
+        .collect();
+        let seconds = run_colmap(options, "verification", &verify, log, &mut |line| {
             if line.contains(" - ") {
                 progress.advance(1);
             }
-        },
-    )?;
-    report.timings.insert("verification".into(), seconds);
-    let (verified, inliers) = database::verified_pairs(&database)?;
-    report.pairs_verified = verified;
-    report.inlier_matches = inliers;
-    Ok(())
+        })?;
+        add_timing(report, "verification", seconds);
+        let (verified, inliers) = database::verified_pairs(database)?;
+        report.pairs_verified = verified;
+        report.inlier_matches = inliers;
+        Ok(())
+    }
 }
 
 #[cfg(test)]
