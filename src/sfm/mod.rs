@@ -466,7 +466,19 @@ fn run_steps(
     report.timings.insert("features".into(), seconds);
 
     let mut frond = None;
-    if options.matcher == Matcher::Auto {
+    // COLMAP's match lists separate the two photo names by a space.
+    let spaced = check
+        .groups
+        .iter()
+        .flat_map(|g| &g.photos)
+        .find(|name| name.contains(char::is_whitespace));
+    if let (Matcher::Auto, Some(name)) = (&options.matcher, spaced) {
+        tracing::warn!(
+            "'{name}': COLMAP's match lists cannot name photos with spaces; matching with COLMAP's exhaustive matcher instead (slower; rename the photos to use Frond's)"
+        );
+        report.matcher = "Exhaustive (photo names with spaces)".into();
+        colmap_matching(&database, &log, options, progress, report)?;
+    } else if options.matcher == Matcher::Auto {
         progress.stage("choosing pairs", 1);
         let started = Instant::now();
         let matcher = FrondMatcher::open(&database, options)?;
