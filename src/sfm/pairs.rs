@@ -32,9 +32,9 @@ pub struct PairOptions {
 impl Default for PairOptions {
     fn default() -> Self {
         Self {
-            retrieved: 8,
+            retrieved: 12,
             sequential: 2,
-            preemptive_features: 256,
+            preemptive_features: 512,
             min_preemptive_matches: 4,
         }
     }
