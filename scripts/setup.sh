@@ -14,8 +14,9 @@ PACKAGES=(
   # eframe GUI under a virtual display, and screenshots
   xvfb xauth libxkbcommon-x11-0 libxkbcommon-dev libx11-dev libxcursor1 libxrandr2 libxi6
   libwayland-dev imagemagick
-  # COLMAP (CPU build) for interop tests and the photo pipeline
-  colmap
+  # COLMAP (CPU build) for interop tests and the photo pipeline; SQLite to read its feature
+  # database (rusqlite links the system library)
+  colmap libsqlite3-dev
 )
 
 as_root() {
