@@ -96,13 +96,10 @@ pub fn select_pairs(
     }
     let scores = preemptive_scores(samples, matching);
     let mut score = vec![vec![0usize; n]; n];
-    let mut k = 0;
-    for i in 0..n {
-        for j in i + 1..n {
-            score[i][j] = scores[k];
-            score[j][i] = scores[k];
-            k += 1;
-        }
+    let upper = (0..n).flat_map(|i| (i + 1..n).map(move |j| (i, j)));
+    for ((i, j), &s) in upper.zip(&scores) {
+        score[i][j] = s;
+        score[j][i] = s;
     }
     for (i, row) in score.iter().enumerate() {
         let mut ranked: Vec<(usize, usize)> = row

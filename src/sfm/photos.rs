@@ -63,8 +63,11 @@ fn jpeg_is_truncated(bytes: &[u8]) -> bool {
     is_jpeg && !tail.windows(2).any(|w| w == [0xFF, 0xD9])
 }
 
+/// A decoded photo's width, height and pixel hash, or why it is unusable.
+type Inspection = Result<(u32, u32, u64), String>;
+
 /// Decodes one photo: its size and a hash of its pixels.
-fn inspect(path: &Path) -> Result<(u32, u32, u64), String> {
+fn inspect(path: &Path) -> Inspection {
     let bytes = std::fs::read(path).map_err(|e| format!("cannot be read ({e})"))?;
     if jpeg_is_truncated(&bytes) {
         return Err("is a truncated JPEG (no end-of-image marker)".into());
@@ -91,7 +94,7 @@ fn inspect(path: &Path) -> Result<(u32, u32, u64), String> {
 /// Checks `photos` (see the module docs). The order of `photos` decides which of two
 /// duplicates is kept (the first).
 pub fn check_photos(photos: &[PathBuf]) -> PhotoCheck {
-    let inspected: Vec<(String, Result<(u32, u32, u64), String>)> = photos
+    let inspected: Vec<(String, Inspection)> = photos
         .par_iter()
         .map(|path| (name_of(path), inspect(path)))
         .collect();
