@@ -289,7 +289,7 @@ pub fn run_sfm(
         path: photos.to_path_buf(),
         message: e.to_string(),
     })?;
-    progress.stage("checking photos", files.len() as u64);
+    progress.stage("structure from motion: checking photos", files.len() as u64);
     let started = Instant::now();
     let check = check_photos(&files);
     progress.advance(files.len() as u64);
@@ -405,7 +405,7 @@ fn run_steps(
     let usable = check.usable();
 
     // Features: one extraction per photo size, so each size gets its own shared camera.
-    progress.stage("extracting features", usable as u64);
+    progress.stage("structure from motion: extracting features", usable as u64);
     let groups: Vec<Vec<String>> = if options.single_camera {
         check.groups.iter().map(|g| g.photos.clone()).collect()
     } else {
@@ -479,7 +479,7 @@ fn run_steps(
         report.matcher = "Exhaustive (photo names with spaces)".into();
         colmap_matching(&database, &log, options, progress, report)?;
     } else if options.matcher == Matcher::Auto {
-        progress.stage("choosing pairs", 1);
+        progress.stage("structure from motion: choosing pairs", 1);
         let started = Instant::now();
         let matcher = FrondMatcher::open(&database, options)?;
         let pairs = matcher.retrieval_pairs(options);
@@ -579,7 +579,7 @@ fn run_steps(
     report.mean_reprojection_error_px = errors.iter().sum::<f64>() / errors.len().max(1) as f64;
 
     if options.undistort {
-        progress.stage("undistorting", 1);
+        progress.stage("structure from motion: undistorting", 1);
         let mut undistort = vec![
             s("image_undistorter"),
             s("--image_path"),
@@ -614,7 +614,7 @@ fn map(
     usable: usize,
     report: &mut SfmReport,
 ) -> Result<Vec<(usize, PathBuf, crate::scene::Reconstruction)>, SfmError> {
-    progress.stage("mapping", usable as u64);
+    progress.stage("structure from motion: mapping", usable as u64);
     if mapped.exists() {
         std::fs::remove_dir_all(mapped).map_err(|e| output_error(mapped, e))?;
     }
@@ -695,7 +695,7 @@ fn colmap_matching(
         s("--SiftMatching.num_threads"),
         options.threads.max(1).to_string(),
     ]);
-    progress.stage("matching (COLMAP)", 0);
+    progress.stage("structure from motion: matching (COLMAP)", 0);
     let seconds = run_colmap(options, "matching", &matching, log, &mut |_| {})?;
     add_timing(report, "matching", seconds);
     let (pairs, inliers) = database::verified_pairs(database)?;
@@ -774,7 +774,7 @@ impl FrondMatcher {
         report: &mut SfmReport,
     ) -> Result<(), SfmError> {
         self.passes += 1;
-        progress.stage("matching pairs", pairs.len() as u64);
+        progress.stage("structure from motion: matching pairs", pairs.len() as u64);
         let started = Instant::now();
         let images = &self.images;
         let matched: Vec<Option<Vec<(u32, u32)>>> = self.pool.install(|| {
@@ -824,7 +824,7 @@ impl FrondMatcher {
             return Ok(());
         }
 
-        progress.stage("verifying pairs", written as u64);
+        progress.stage("structure from motion: verifying pairs", written as u64);
         let threads = options.threads.max(1).to_string();
         let verify: Vec<String> = [
             "matches_importer",
