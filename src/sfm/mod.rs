@@ -528,9 +528,28 @@ fn run_steps(
             report.second_pass_photos = missing.len();
             matcher.match_and_verify(&pairs, &database, &log, options, progress, report)?;
             check_cancelled(progress)?;
-            models = map(
+            // The first mapping is set aside and kept if the second registers fewer photos
+            // (COLMAP's mapper is not deterministic on several threads).
+            let first = root.join("mapped_first_pass");
+            std::fs::rename(&mapped, &first).map_err(|e| output_error(&first, e))?;
+            let second = map(
                 photos, &database, &mapped, &log, options, progress, usable, report,
             )?;
+            let registered = |m: &[(usize, PathBuf, crate::scene::Reconstruction)]| {
+                m.first().map_or(0, |(n, _, _)| *n)
+            };
+            if registered(&second) >= registered(&models) {
+                models = second;
+                std::fs::remove_dir_all(&first).map_err(|e| output_error(&first, e))?;
+            } else {
+                tracing::warn!(
+                    "the second mapping registered {} photos, the first {}: keeping the first",
+                    registered(&second),
+                    registered(&models)
+                );
+                std::fs::remove_dir_all(&mapped).map_err(|e| output_error(&mapped, e))?;
+                std::fs::rename(&first, &mapped).map_err(|e| output_error(&mapped, e))?;
+            }
         }
     }
     report.models = models.len();
