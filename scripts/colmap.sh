@@ -2,8 +2,9 @@
 # Runs COLMAP's sparse reconstruction on the CPU over DIR/images:
 #   DIR/colmap/database.db, DIR/colmap/sparse/0 (the largest model), DIR/colmap/dense (its
 #   undistorted workspace, input for `frond densify`), and a summary line.
-# `frond sfm PHOTOS --out OUT` does the same from Rust (with sfm.json); this script is the
-# plain-shell equivalent for users who drive COLMAP themselves.
+# `frond sfm PHOTOS --out OUT` is the faster route (photo checks, Frond's pair retrieval and
+# matching, COLMAP's verification and mapper; sfm.json); this script is plain COLMAP with its
+# own matchers, for users who drive COLMAP themselves and as the baseline it is measured against.
 # Usage: scripts/colmap.sh DIR [--matcher exhaustive|sequential] [--camera PINHOLE|SIMPLE_RADIAL|OPENCV]
 # Matching is exhaustive up to 60 images, sequential beyond (override with --matcher).
 set -euo pipefail
