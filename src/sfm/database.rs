@@ -35,11 +35,15 @@ fn error(path: &Path, message: impl std::fmt::Display) -> DatabaseError {
     }
 }
 
-/// Every image of the database with its descriptors, ordered by name.
-pub fn read_images(path: &Path) -> Result<Vec<DatabaseImage>, DatabaseError> {
+fn open_read_only(path: &Path) -> Result<rusqlite::Connection, DatabaseError> {
     let flags =
         rusqlite::OpenFlags::SQLITE_OPEN_READ_ONLY | rusqlite::OpenFlags::SQLITE_OPEN_NO_MUTEX;
-    let db = rusqlite::Connection::open_with_flags(path, flags).map_err(|e| error(path, e))?;
+    rusqlite::Connection::open_with_flags(path, flags).map_err(|e| error(path, e))
+}
+
+/// Every image of the database with its descriptors, ordered by name.
+pub fn read_images(path: &Path) -> Result<Vec<DatabaseImage>, DatabaseError> {
+    let db = open_read_only(path)?;
     let mut statement = db
         .prepare(
             "SELECT images.image_id, images.name, images.camera_id, \
@@ -141,9 +145,7 @@ fn keypoint_scales(bytes: &[u8], rows: i64, columns: i64) -> Result<Vec<f32>, St
 
 /// Verified two-view geometries in the database: (pairs with inliers, inlier matches).
 pub fn verified_pairs(path: &Path) -> Result<(usize, usize), DatabaseError> {
-    let flags =
-        rusqlite::OpenFlags::SQLITE_OPEN_READ_ONLY | rusqlite::OpenFlags::SQLITE_OPEN_NO_MUTEX;
-    let db = rusqlite::Connection::open_with_flags(path, flags).map_err(|e| error(path, e))?;
+    let db = open_read_only(path)?;
     db.query_row(
         "SELECT COUNT(*), COALESCE(SUM(rows), 0) FROM two_view_geometries WHERE rows > 0",
         [],
@@ -158,7 +160,7 @@ mod tests {
     use super::*;
 
     /// A database with COLMAP's schema for the tables read here.
-    pub(crate) fn write_test_database(path: &Path, images: &[(&str, Vec<[u8; 128]>)]) {
+    fn write_test_database(path: &Path, images: &[(&str, Vec<[u8; 128]>)]) {
         let db = rusqlite::Connection::open(path).unwrap();
         db.execute_batch(
             "CREATE TABLE images (image_id INTEGER PRIMARY KEY, name TEXT NOT NULL UNIQUE, camera_id INTEGER NOT NULL);
