@@ -54,22 +54,12 @@ fn colmap_then_densify_recovers_the_plant_surface() {
             .unwrap();
     }
     let out = dir.path().join("sfm");
-    // One thread: COLMAP's multithreaded matching and mapping are not reproducible, and a
-    // test must see the same model on every run.
-    // Only file-name neighbours as first pairs: the two rings meet in one pair (view 11–12),
-    // so the first mapping leaves photos out and the second pass (those photos against every
-    // other) must bring them in.
+    // One thread: COLMAP's multithreaded matching and mapping are not reproducible.
     let sfm_options = SfmOptions {
         threads: 1,
-        pairs: PairOptions {
-            retrieved: 0,
-            sequential: 1,
-            ..PairOptions::default()
-        },
         ..SfmOptions::default()
     };
     let report = run_sfm(&dataset.join("images"), &out, &sfm_options, &NoProgress).unwrap();
-    assert!(report.second_pass_photos > 0, "{report:?}");
     eprintln!("{report:?}");
     assert_eq!(report.photos, 27);
     let rejected: Vec<&str> = report.rejected.iter().map(|r| r.photo.as_str()).collect();
@@ -83,8 +73,7 @@ fn colmap_then_densify_recovers_the_plant_surface() {
         report.unregistered.len() + report.registered == 24,
         "{report:?}"
     );
-    // Frond's matcher chose fewer pairs than all of them (this capture is sparse: 30° between
-    // the photos of a ring, so a second pass matches some photos with every other).
+    // Frond's matcher chose fewer pairs than all of them.
     assert!(report.pairs_matched < 24 * 23 / 2, "{report:?}");
     assert!(out.join("sparse/0/points3D.bin").is_file());
     assert!(out.join("sfm.json").is_file());
@@ -118,6 +107,67 @@ fn colmap_then_densify_recovers_the_plant_surface() {
         accuracy.median_error_fraction_of_height <= 0.005,
         "{accuracy:?}"
     );
+}
+
+/// Photos the first pairs leave unregistered are matched with every other photo and mapped
+/// again. The file names are shuffled (file-name neighbours are 7 views, 210°, apart) and the
+/// first pairs are file-name neighbours only, so the first pairs see almost nothing in common
+/// and the second pass has to find the capture's real pairs.
+///
+/// (A capture whose first pairs are merely weak is not a stable test: with file-name
+/// neighbours on the unshuffled capture, five runs with two threads gave 24 or 15 of 24
+/// photos from verifications that differed by one inlier, 9,346 or 9,347.)
+#[test]
+fn photos_left_out_by_the_first_pairs_are_matched_with_every_photo() {
+    if !common::colmap_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let dataset = dir.path().join("dataset");
+    let options = SynthOptions {
+        preset: Preset::Broadleaf,
+        seed: 3,
+        views: 24,
+        width: 640,
+        height: 480,
+        with_points: false,
+        ..SynthOptions::default()
+    };
+    write_dataset(&options, &dataset, &NoProgress).unwrap();
+    let shuffled = dir.path().join("shuffled");
+    std::fs::create_dir(&shuffled).unwrap();
+    for n in 0..24 {
+        std::fs::copy(
+            dataset.join(format!("images/view_{:04}.png", (7 * n) % 24)),
+            shuffled.join(format!("shot_{n:02}.png")),
+        )
+        .unwrap();
+    }
+    let out = dir.path().join("sfm");
+    let sfm_options = SfmOptions {
+        threads: 1,
+        undistort: false,
+        pairs: PairOptions {
+            retrieved: 0,
+            sequential: 1,
+            ..PairOptions::default()
+        },
+        ..SfmOptions::default()
+    };
+    let report = run_sfm(&shuffled, &out, &sfm_options, &NoProgress).unwrap();
+    eprintln!("{report:?}");
+    assert!(report.second_pass_photos >= 20, "{report:?}");
+    assert!(report.registered >= 20, "{report:?}");
+    assert_eq!(
+        report.registered + report.unregistered.len(),
+        24,
+        "{report:?}"
+    );
+    // The first pairs are the 23 neighbours; the second adds each left-out photo with every
+    // other photo it was not yet matched with.
+    assert!(report.pairs_matched > 23 + 100, "{report:?}");
+    let (model, _) = frond::scene::read_model(&out.join("sparse/0")).unwrap();
+    assert_eq!(model.images().len(), report.registered);
 }
 
 /// Three files named like photos that are not images: named before any COLMAP step (COLMAP's
