@@ -38,4 +38,5 @@ pub mod scene;
 pub mod segment;
 pub mod sfm;
 pub mod synth;
+pub mod traits;
 pub mod util;

@@ -1,0 +1,258 @@
+//! How well a reconstruction's traits match the truth: the ground-truth traits are computed
+//! by the same code from the true meshes and branches, and compared organ by organ (leaves
+//! paired by the evaluation's point matching, branches by their centrelines).
+
+use std::collections::BTreeMap;
+
+use nalgebra::Point3;
+use serde::Serialize;
+
+use super::{PlantOrgans, TraitTable, branch_length, branch_organ_id, leaf_organ_id, plant_traits};
+use crate::branch::plant::SkeletonRecord;
+use crate::eval::Summary;
+use crate::eval::align::Similarity;
+
+/// One leaf's traits, true and reconstructed.
+#[derive(Clone, Debug, Serialize)]
+pub struct LeafComparison {
+    pub gt_leaf: u32,
+    pub leaf: u32,
+    pub area_relative_error: f64,
+    pub length_relative_error: f64,
+    pub inclination_error_deg: f64,
+}
+
+/// One matched branch.
+#[derive(Clone, Debug, Serialize)]
+pub struct BranchComparison {
+    pub gt_branch: u32,
+    pub branch: u32,
+    pub length_relative_error: f64,
+    /// Symmetric mean centreline distance / the tolerance it was matched under.
+    pub distance: f64,
+}
+
+/// The accuracy of one plant's traits.
+#[derive(Clone, Debug, Serialize)]
+pub struct TraitAccuracy {
+    pub gt_leaves: usize,
+    pub leaves: Vec<LeafComparison>,
+    pub leaf_area_relative_error: Summary,
+    pub leaf_length_relative_error: Summary,
+    pub leaf_inclination_error_deg: Summary,
+    pub gt_branches: usize,
+    pub branches: Vec<BranchComparison>,
+    pub branch_length_relative_error: Summary,
+    pub plant_height_relative_error: Option<f64>,
+    pub total_leaf_area_relative_error: Option<f64>,
+}
+
+/// Applies a similarity (prediction → truth frame) to every organ.
+pub fn transform_organs(organs: &mut PlantOrgans, similarity: &Similarity) {
+    for leaf in &mut organs.leaves {
+        for p in &mut leaf.mesh.positions {
+            *p = similarity.apply(&p.cast::<f64>()).cast::<f32>();
+        }
+        leaf.mesh.compute_normals();
+        leaf.base_world = leaf.base_world.map(|b| similarity.apply(&b));
+    }
+    for branch in &mut organs.branches {
+        for c in branch
+            .centerline
+            .iter_mut()
+            .chain(branch.control_points.iter_mut())
+        {
+            let p = similarity.apply(&Point3::from(*c));
+            *c = [p.x, p.y, p.z];
+        }
+        branch.radius_start *= similarity.scale;
+        branch.radius_end *= similarity.scale;
+        branch.length *= similarity.scale;
+    }
+    organs.up_world = similarity.rotation * organs.up_world;
+}
+
+fn point_segment_distance(p: &Point3<f64>, a: &Point3<f64>, b: &Point3<f64>) -> f64 {
+    let ab = b - a;
+    let t = if ab.norm_squared() > 0.0 {
+        ((p - a).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p - (a + ab * t)).norm()
+}
+
+fn polyline_distance(p: &Point3<f64>, line: &[[f64; 3]]) -> f64 {
+    match line {
+        [] => f64::INFINITY,
+        [only] => (p - Point3::from(*only)).norm(),
+        _ => line
+            .windows(2)
+            .map(|w| point_segment_distance(p, &Point3::from(w[0]), &Point3::from(w[1])))
+            .fold(f64::INFINITY, f64::min),
+    }
+}
+
+/// Symmetric mean distance between two centrelines.
+fn centreline_distance(a: &SkeletonRecord, b: &SkeletonRecord) -> f64 {
+    let one_way = |from: &SkeletonRecord, to: &SkeletonRecord| {
+        let n = from.centerline.len().max(1) as f64;
+        from.centerline
+            .iter()
+            .map(|c| polyline_distance(&Point3::from(*c), &to.centerline))
+            .sum::<f64>()
+            / n
+    };
+    one_way(a, b).max(one_way(b, a))
+}
+
+/// Compares the traits of a prediction (already in the truth's frame) with the truth's.
+/// `leaf_pairs` are (GT leaf, predicted leaf) from the evaluation's matching. Branches are
+/// paired greedily by symmetric mean centreline distance, within twice the true base radius
+/// or 2 % of the plant height, whichever is larger.
+pub fn compare(
+    truth: &PlantOrgans,
+    prediction: &PlantOrgans,
+    leaf_pairs: &[(u32, u32)],
+    plant_height: f64,
+) -> (TraitAccuracy, TraitTable, TraitTable) {
+    let gt_table = plant_traits(truth, None);
+    let table = plant_traits(prediction, None);
+    let mut leaves = Vec::new();
+    for &(gt_leaf, leaf) in leaf_pairs {
+        let (g, p) = (leaf_organ_id(gt_leaf), leaf_organ_id(leaf));
+        let get = |t: &TraitTable, id: &str, name: &str| t.value(id, name);
+        if let (Some(ga), Some(pa), Some(gl), Some(pl), Some(gi), Some(pi)) = (
+            get(&gt_table, &g, "area"),
+            get(&table, &p, "area"),
+            get(&gt_table, &g, "length"),
+            get(&table, &p, "length"),
+            get(&gt_table, &g, "inclination"),
+            get(&table, &p, "inclination"),
+        ) {
+            leaves.push(LeafComparison {
+                gt_leaf,
+                leaf,
+                area_relative_error: (pa - ga).abs() / ga,
+                length_relative_error: (pl - gl).abs() / gl,
+                inclination_error_deg: (pi - gi).abs(),
+            });
+        }
+    }
+    let mut candidates = Vec::new();
+    for g in &truth.branches {
+        let tolerance = (2.0 * g.radius_start).max(0.02 * plant_height);
+        for p in &prediction.branches {
+            let d = centreline_distance(g, p);
+            if d <= tolerance {
+                candidates.push((d / tolerance, g, p));
+            }
+        }
+    }
+    candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut used_gt = BTreeMap::new();
+    let mut used_pred = BTreeMap::new();
+    let mut branches = Vec::new();
+    for (d, g, p) in candidates {
+        if used_gt.contains_key(&g.id) || used_pred.contains_key(&p.id) {
+            continue;
+        }
+        used_gt.insert(g.id, p.id);
+        used_pred.insert(p.id, g.id);
+        let gl = gt_table
+            .value(&branch_organ_id(g.id), "length")
+            .unwrap_or(branch_length(g));
+        let pl = table
+            .value(&branch_organ_id(p.id), "length")
+            .unwrap_or(branch_length(p));
+        branches.push(BranchComparison {
+            gt_branch: g.id,
+            branch: p.id,
+            length_relative_error: (pl - gl).abs() / gl,
+            distance: d,
+        });
+    }
+    let relative = |name: &str| {
+        let g = gt_table.value("plant", name)?;
+        let p = table.value("plant", name)?;
+        (g > 0.0).then(|| (p - g).abs() / g)
+    };
+    let collect =
+        |f: &dyn Fn(&LeafComparison) -> f64| Summary::of(&leaves.iter().map(f).collect::<Vec<_>>());
+    let accuracy = TraitAccuracy {
+        gt_leaves: truth.leaves.len(),
+        leaf_area_relative_error: collect(&|l| l.area_relative_error),
+        leaf_length_relative_error: collect(&|l| l.length_relative_error),
+        leaf_inclination_error_deg: collect(&|l| l.inclination_error_deg),
+        gt_branches: truth.branches.len(),
+        branch_length_relative_error: Summary::of(
+            &branches
+                .iter()
+                .map(|b| b.length_relative_error)
+                .collect::<Vec<_>>(),
+        ),
+        plant_height_relative_error: relative("height"),
+        total_leaf_area_relative_error: relative("total_leaf_area"),
+        leaves,
+        branches,
+    };
+    (accuracy, gt_table, table)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::traits::LeafOrgan;
+    use nalgebra::Vector3;
+
+    fn organs(leaf_scale: f64, branch_extra: f64) -> PlantOrgans {
+        let mesh = crate::traits::tests::rectangle(
+            Point3::new(0.0, 0.0, 0.3),
+            Vector3::x(),
+            Vector3::y(),
+            0.2 * leaf_scale,
+            0.05 * leaf_scale,
+        );
+        PlantOrgans {
+            plant: "p".into(),
+            up_world: Vector3::z(),
+            leaves: vec![LeafOrgan {
+                id: 7,
+                mesh,
+                base_world: Some(Point3::new(0.0, 0.0, 0.3)),
+                branch: None,
+            }],
+            branches: vec![SkeletonRecord {
+                id: 3,
+                parent: None,
+                parent_fraction: 0.0,
+                control_points: Vec::new(),
+                radius_start: 0.01,
+                radius_end: 0.01,
+                length: 0.0,
+                centerline: vec![[0.0, 0.0, 0.0], [0.0, 0.0, 0.3 + branch_extra]],
+            }],
+        }
+    }
+
+    #[test]
+    fn a_scaled_leaf_and_a_longer_stem_show_their_errors() {
+        let truth = organs(1.0, 0.0);
+        let prediction = organs(1.1, 0.003);
+        let (accuracy, _, _) = compare(&truth, &prediction, &[(7, 7)], 0.3);
+        let leaf = &accuracy.leaves[0];
+        assert!((leaf.area_relative_error - 0.21).abs() < 1e-4, "{leaf:?}");
+        assert!((leaf.length_relative_error - 0.1).abs() < 1e-4, "{leaf:?}");
+        assert!(leaf.inclination_error_deg < 1e-6);
+        assert_eq!(accuracy.branches.len(), 1);
+        assert!((accuracy.branches[0].length_relative_error - 0.01).abs() < 1e-9);
+        // A stem far away is not matched.
+        let mut far = organs(1.0, 0.0);
+        for c in &mut far.branches[0].centerline {
+            c[0] += 0.5;
+        }
+        let (accuracy, _, _) = compare(&truth, &far, &[], 0.3);
+        assert!(accuracy.branches.is_empty());
+        assert_eq!(accuracy.leaf_area_relative_error.count, 0);
+    }
+}

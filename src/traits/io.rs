@@ -1,0 +1,237 @@
+//! Reading what traits are measured from (a reconstruction's output folder, a synthetic
+//! dataset's ground truth) and writing `traits.csv` / `traits.json` (the only writers).
+
+use std::path::Path;
+
+use nalgebra::{Point3, Vector3};
+use serde::Deserialize;
+
+use super::{
+    LeafOrgan, PlantOrgans, TRAITS_FORMAT, TRAITS_VERSION, TraitRow, TraitTable, TraitsError,
+};
+use crate::branch::plant::SkeletonFile;
+use crate::mesh::TriMesh;
+use crate::pipeline::ReconstructionReport;
+use crate::pipeline::files::SegmentsFile;
+use crate::util::atomic::write_atomic;
+
+pub const TRAITS_CSV: &str = "traits.csv";
+pub const TRAITS_JSON: &str = "traits.json";
+/// The CSV header, in column order.
+pub const CSV_COLUMNS: [&str; 6] = ["plant", "organ_id", "organ_type", "trait", "value", "unit"];
+
+fn input(path: &Path, message: impl std::fmt::Display) -> TraitsError {
+    TraitsError::Input {
+        path: path.display().to_string(),
+        message: message.to_string(),
+    }
+}
+
+fn output(path: &Path, message: impl std::fmt::Display) -> TraitsError {
+    TraitsError::Output {
+        path: path.display().to_string(),
+        message: message.to_string(),
+    }
+}
+
+/// The organs of a `frond reconstruct` output folder: leaf meshes from `plant.glb`, the branch
+/// tree from `skeleton.json`, the up direction from `segments.json`, leaf bases and petiole
+/// attachments from `report.json`.
+pub fn read_reconstruction(out: &Path, plant: &str) -> Result<PlantOrgans, TraitsError> {
+    let segments_path = out.join(crate::pipeline::files::SEGMENTS_FILE);
+    let segments = SegmentsFile::read(&segments_path).map_err(|e| input(&segments_path, e))?;
+    let report_path = out.join("report.json");
+    let report = ReconstructionReport::read(&report_path).map_err(|e| input(&report_path, e))?;
+    let skeleton_path = out.join("skeleton.json");
+    let branches = SkeletonFile::read(&skeleton_path)
+        .map_err(|e| input(&skeleton_path, e))?
+        .branches;
+    let glb_path = out.join("plant.glb");
+    let bytes = std::fs::read(&glb_path).map_err(|e| input(&glb_path, e))?;
+    let nodes =
+        crate::model::gltf::read_glb_meshes(&bytes, &glb_path).map_err(|e| input(&glb_path, e))?;
+    let mut leaves = Vec::new();
+    for node in nodes {
+        let Some(id) = node
+            .name
+            .strip_prefix("leaf_")
+            .and_then(|s| s.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        let fitted = report.leaves.iter().find(|l| l.segment == id);
+        let mut base_world = fitted.map(|l| Point3::from(l.base));
+        let mut branch = report
+            .attachment
+            .petioles
+            .iter()
+            .find(|p| p.leaf == id)
+            .map(|p| (p.branch, p.parent_fraction));
+        if fitted.is_none() {
+            // A posed leaf: the posed record whose base is nearest the mesh.
+            let nearest = report.attachment.posed.iter().min_by(|a, b| {
+                distance_to_vertices(&node.mesh, &Point3::from(a.base))
+                    .total_cmp(&distance_to_vertices(&node.mesh, &Point3::from(b.base)))
+            });
+            if let Some(posed) = nearest {
+                base_world = Some(Point3::from(posed.base));
+                branch = Some((posed.branch, 1.0));
+            }
+        }
+        leaves.push(LeafOrgan {
+            id,
+            mesh: node.mesh,
+            base_world,
+            branch,
+        });
+    }
+    Ok(PlantOrgans {
+        plant: plant.to_owned(),
+        up_world: Vector3::from(segments.up),
+        leaves,
+        branches,
+    })
+}
+
+fn distance_to_vertices(mesh: &TriMesh, p: &Point3<f64>) -> f64 {
+    mesh.positions
+        .iter()
+        .map(|v| (v.cast::<f64>() - p).norm())
+        .fold(f64::INFINITY, f64::min)
+}
+
+#[derive(Deserialize)]
+struct GtLeaf {
+    id: u32,
+    mesh: String,
+    base: [f64; 3],
+    #[serde(default)]
+    branch: Option<u32>,
+}
+
+/// The organs of a synthetic dataset's ground truth (`gt/leaves.json` and its meshes,
+/// `gt/branches.json`; z is up in the synthetic world). Each leaf sits at the tip of its
+/// petiole branch.
+pub fn read_ground_truth(dataset: &Path, plant: &str) -> Result<PlantOrgans, TraitsError> {
+    let gt = dataset.join("gt");
+    let leaves_path = gt.join("leaves.json");
+    let text = std::fs::read_to_string(&leaves_path).map_err(|e| input(&leaves_path, e))?;
+    let records: Vec<GtLeaf> = serde_json::from_str(&text).map_err(|e| input(&leaves_path, e))?;
+    let mut leaves = Vec::with_capacity(records.len());
+    for record in records {
+        let path = gt.join(&record.mesh);
+        let mesh = TriMesh::read_ply(&path).map_err(|e| input(&path, e))?;
+        leaves.push(LeafOrgan {
+            id: record.id,
+            mesh,
+            base_world: Some(Point3::from(record.base)),
+            branch: record.branch.map(|b| (b, 1.0)),
+        });
+    }
+    let branches_path = gt.join("branches.json");
+    let branches = SkeletonFile::read(&branches_path)
+        .map_err(|e| input(&branches_path, e))?
+        .branches;
+    Ok(PlantOrgans {
+        plant: plant.to_owned(),
+        up_world: Vector3::z(),
+        leaves,
+        branches,
+    })
+}
+
+/// One CSV field: quoted when it holds a comma, quote or line break (RFC 4180).
+fn csv_field(text: &str) -> String {
+    if text.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", text.replace('"', "\"\""))
+    } else {
+        text.to_owned()
+    }
+}
+
+/// The long table as CSV text (header first).
+pub fn csv_text(rows: &[TraitRow]) -> String {
+    let mut text = CSV_COLUMNS.join(",");
+    text.push('\n');
+    for r in rows {
+        let fields = [
+            csv_field(&r.plant),
+            csv_field(&r.organ_id),
+            csv_field(&r.organ_type),
+            csv_field(&r.trait_name),
+            format!("{}", r.value),
+            csv_field(&r.unit),
+        ];
+        text.push_str(&fields.join(","));
+        text.push('\n');
+    }
+    text
+}
+
+/// Writes `traits.csv` and `traits.json` into `dir`, each atomically.
+pub fn write_traits(dir: &Path, table: &TraitTable) -> Result<(), TraitsError> {
+    std::fs::create_dir_all(dir).map_err(|e| output(dir, e))?;
+    let csv = dir.join(TRAITS_CSV);
+    write_atomic(&csv, csv_text(&table.rows).as_bytes()).map_err(|e| output(&csv, e))?;
+    let json = dir.join(TRAITS_JSON);
+    let text = serde_json::to_string_pretty(table).map_err(|e| output(&json, e))?;
+    write_atomic(&json, text.as_bytes()).map_err(|e| output(&json, e))
+}
+
+/// Reads and checks a `traits.json`.
+pub fn read_traits(path: &Path) -> Result<TraitTable, TraitsError> {
+    let text = std::fs::read_to_string(path).map_err(|e| input(path, e))?;
+    let table: TraitTable = serde_json::from_str(&text).map_err(|e| input(path, e))?;
+    if table.format != TRAITS_FORMAT || table.version != TRAITS_VERSION {
+        return Err(input(
+            path,
+            format!(
+                "is `{}` version {}, expected `{TRAITS_FORMAT}` version {TRAITS_VERSION}",
+                table.format, table.version
+            ),
+        ));
+    }
+    Ok(table)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn csv_fields_with_commas_and_quotes_are_quoted() {
+        let rows = vec![TraitRow {
+            plant: "pot 3, \"left\"".into(),
+            organ_id: "leaf_001".into(),
+            organ_type: "leaf".into(),
+            trait_name: "area".into(),
+            value: 0.25,
+            unit: "m2".into(),
+        }];
+        let text = csv_text(&rows);
+        assert_eq!(
+            text,
+            "plant,organ_id,organ_type,trait,value,unit\n\"pot 3, \"\"left\"\"\",leaf_001,leaf,area,0.25,m2\n"
+        );
+    }
+
+    #[test]
+    fn traits_json_round_trips_and_refuses_other_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let table = TraitTable {
+            format: TRAITS_FORMAT.into(),
+            version: TRAITS_VERSION,
+            plant: "a".into(),
+            scale: None,
+            up_world: [0.0, 0.0, 1.0],
+            rows: Vec::new(),
+        };
+        write_traits(dir.path(), &table).unwrap();
+        assert_eq!(read_traits(&dir.path().join(TRAITS_JSON)).unwrap(), table);
+        std::fs::write(dir.path().join("x.json"), r#"{"format":"other"}"#).unwrap();
+        let err = read_traits(&dir.path().join("x.json"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("x.json"), "{err}");
+    }
+}

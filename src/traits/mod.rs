@@ -1,0 +1,972 @@
+//! Plant traits (`frond traits`): per-organ measurements of a reconstructed plant (or of a
+//! synthetic plant's ground truth, by the same code) as a long table, one row per organ and
+//! trait: leaves (area, midrib length, width, perimeter, inclination, azimuth, insertion
+//! height, deformation, branch), branches (length, radii, insertion angle and height), the
+//! internodes and divergence angles along every axis, and the whole plant (height, crown
+//! diameter, hull volume, leaf count and area, projected leaf area from above).
+//!
+//! Takes a [`PlantOrgans`] (leaf meshes, skeleton records, the up direction) and a
+//! [`Scale`]; returns a [`TraitTable`]. Files: `traits.csv` and `traits.json`, one writer
+//! each ([`io`]).
+
+pub mod accuracy;
+pub mod hull;
+pub mod io;
+
+use std::collections::BTreeMap;
+
+use nalgebra::{Matrix3, Point2, Point3, SymmetricEigen, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::branch::plant::SkeletonRecord;
+use crate::mesh::TriMesh;
+
+/// Errors of the traits stage.
+#[derive(Debug, thiserror::Error)]
+pub enum TraitsError {
+    #[error("{path}: {message}")]
+    Input { path: String, message: String },
+    #[error("writing {path}: {message}")]
+    Output { path: String, message: String },
+    #[error("scale: {0}")]
+    Scale(String),
+}
+
+/// One leaf as the traits see it.
+#[derive(Clone, Debug)]
+pub struct LeafOrgan {
+    pub id: u32,
+    /// World frame (the reconstruction's).
+    pub mesh: TriMesh,
+    /// Where the leaf meets its petiole, when the reconstruction knows it.
+    pub base_world: Option<Point3<f64>>,
+    /// The branch the leaf is attached to, and where along it (0 = base, 1 = tip).
+    pub branch: Option<(u32, f64)>,
+}
+
+/// What traits are measured from.
+#[derive(Clone, Debug)]
+pub struct PlantOrgans {
+    pub plant: String,
+    /// Unit up direction (world frame).
+    pub up_world: Vector3<f64>,
+    pub leaves: Vec<LeafOrgan>,
+    pub branches: Vec<SkeletonRecord>,
+}
+
+/// How model units become metres.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Scale {
+    /// Metres per model unit.
+    pub metres_per_unit: f64,
+    /// Where the scale came from, as the user gave it.
+    pub source: String,
+}
+
+impl Scale {
+    /// A factor given directly.
+    pub fn factor(metres_per_unit: f64) -> Result<Self, TraitsError> {
+        if !(metres_per_unit.is_finite() && metres_per_unit > 0.0) {
+            return Err(TraitsError::Scale(format!(
+                "the factor must be a positive number of metres per model unit, not {metres_per_unit}"
+            )));
+        }
+        Ok(Self {
+            metres_per_unit,
+            source: format!("factor {metres_per_unit} m per model unit"),
+        })
+    }
+
+    /// A known distance between two points of the model: `X1,Y1,Z1:X2,Y2,Z2:METRES` (model
+    /// coordinates, e.g. picked on two marker corners or the ends of a ruler).
+    pub fn parse_two_points(text: &str) -> Result<Self, TraitsError> {
+        let parts: Vec<&str> = text.split(':').collect();
+        let point = |s: &str| -> Result<Point3<f64>, TraitsError> {
+            let v: Vec<f64> = s
+                .split(',')
+                .map(|c| c.trim().parse::<f64>())
+                .collect::<Result<_, _>>()
+                .map_err(|_| TraitsError::Scale(format!("`{s}` is not X,Y,Z")))?;
+            match v.as_slice() {
+                [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(Point3::new(*x, *y, *z)),
+                _ => Err(TraitsError::Scale(format!("`{s}` is not X,Y,Z"))),
+            }
+        };
+        let [a, b, metres] = parts.as_slice() else {
+            return Err(TraitsError::Scale(format!(
+                "`{text}`: expected X1,Y1,Z1:X2,Y2,Z2:METRES"
+            )));
+        };
+        let (a, b) = (point(a)?, point(b)?);
+        let metres: f64 = metres
+            .trim()
+            .parse()
+            .map_err(|_| TraitsError::Scale(format!("`{metres}` is not a distance in metres")))?;
+        let units = (b - a).norm();
+        if !(units > 0.0) {
+            return Err(TraitsError::Scale(format!(
+                "`{text}`: the two points are the same"
+            )));
+        }
+        let mut scale = Self::factor(metres / units)?;
+        scale.source = format!("{metres} m between {a} and {b} ({units} model units)");
+        Ok(scale)
+    }
+}
+
+/// One row of the long table.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TraitRow {
+    pub plant: String,
+    pub organ_id: String,
+    /// `leaf`, `stem`, `branch`, `internode` or `plant`.
+    pub organ_type: String,
+    #[serde(rename = "trait")]
+    pub trait_name: String,
+    pub value: f64,
+    pub unit: String,
+}
+
+/// A plant's traits.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TraitTable {
+    pub format: String,
+    pub version: u32,
+    pub plant: String,
+    /// `None`: the values are in model units (COLMAP models are up to scale).
+    pub scale: Option<Scale>,
+    pub up_world: [f64; 3],
+    pub rows: Vec<TraitRow>,
+}
+
+pub const TRAITS_FORMAT: &str = "frond traits";
+pub const TRAITS_VERSION: u32 = 1;
+
+impl TraitTable {
+    /// The value of one organ's trait.
+    pub fn value(&self, organ_id: &str, trait_name: &str) -> Option<f64> {
+        self.rows
+            .iter()
+            .find(|r| r.organ_id == organ_id && r.trait_name == trait_name)
+            .map(|r| r.value)
+    }
+}
+
+/// Organ ids as the table writes them (`leaf_003`, `branch_012`, the glb node names).
+pub fn leaf_organ_id(id: u32) -> String {
+    format!("leaf_{id:03}")
+}
+
+pub fn branch_organ_id(id: u32) -> String {
+    format!("branch_{id:03}")
+}
+
+#[derive(Clone, Copy)]
+enum Kind {
+    Length,
+    Area,
+    Volume,
+    Angle,
+    Count,
+    Id,
+}
+
+struct Units {
+    factor: f64,
+    metric: bool,
+}
+
+impl Units {
+    fn convert(&self, kind: Kind, value: f64) -> (f64, String) {
+        let suffix = |power: i32| -> String {
+            match (self.metric, power) {
+                (true, 1) => "m".into(),
+                (true, p) => format!("m{p}"),
+                (false, 1) => "model units".into(),
+                (false, p) => format!("model units^{p}"),
+            }
+        };
+        match kind {
+            Kind::Length => (value * self.factor, suffix(1)),
+            Kind::Area => (value * self.factor.powi(2), suffix(2)),
+            Kind::Volume => (value * self.factor.powi(3), suffix(3)),
+            Kind::Angle => (value, "deg".into()),
+            Kind::Count => (value, "count".into()),
+            Kind::Id => (value, "id".into()),
+        }
+    }
+}
+
+/// Measurements of one leaf (model units, degrees).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LeafTraits {
+    pub area: f64,
+    pub length: f64,
+    pub width: f64,
+    pub perimeter: f64,
+    pub inclination_deg: f64,
+    pub azimuth_deg: f64,
+    pub base_world: Point3<f64>,
+    pub tip_world: Point3<f64>,
+    pub normal_world: Vector3<f64>,
+    /// RMS distance of the leaf surface from its fitted plane.
+    pub deformation: f64,
+}
+
+/// Area-weighted vertex weights of a mesh (a third of each incident triangle's area).
+fn vertex_weights(mesh: &TriMesh) -> Vec<f64> {
+    let mut w = vec![0.0; mesh.positions.len()];
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        let a = mesh.triangle_area(t) as f64 / 3.0;
+        for &v in tri {
+            if let Some(slot) = w.get_mut(v as usize) {
+                *slot += a;
+            }
+        }
+    }
+    w
+}
+
+/// A horizontal frame (east, north) for azimuths: world x projected on the horizontal plane
+/// (world y where x is vertical), and up × east.
+fn horizontal_frame(up: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+    let mut east = Vector3::x() - up * up.x;
+    if east.norm() < 1e-6 {
+        east = Vector3::y() - up * up.y;
+    }
+    let east = east.normalize();
+    (east, up.cross(&east))
+}
+
+/// Measures one leaf. The midrib follows the leaf's main axis: the area-weighted centroids of
+/// 24 slices across it, from the extreme vertex at the base end to the one at the tip end.
+/// The base end is the one nearer `base_world` (or, without it, nearer `axis_world`, a point
+/// on the plant's axis). `None` for a mesh without area.
+pub fn leaf_traits(
+    mesh: &TriMesh,
+    base_world: Option<Point3<f64>>,
+    axis_world: &Point3<f64>,
+    up: &Vector3<f64>,
+) -> Option<LeafTraits> {
+    let area = mesh.area();
+    if !(area > 0.0) || mesh.positions.is_empty() {
+        return None;
+    }
+    let points: Vec<Point3<f64>> = mesh.positions.iter().map(|p| p.cast::<f64>()).collect();
+    let weights = vertex_weights(mesh);
+    let total: f64 = weights.iter().sum();
+    if !(total > 0.0) {
+        return None;
+    }
+    let centroid = Point3::from(
+        points
+            .iter()
+            .zip(&weights)
+            .map(|(p, w)| p.coords * *w)
+            .sum::<Vector3<f64>>()
+            / total,
+    );
+    let mut covariance = Matrix3::zeros();
+    for (p, w) in points.iter().zip(&weights) {
+        let d = p - centroid;
+        covariance += d * d.transpose() * *w;
+    }
+    let eigen = SymmetricEigen::new(covariance / total);
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| eigen.eigenvalues[b].total_cmp(&eigen.eigenvalues[a]));
+    let major: Vector3<f64> = eigen.eigenvectors.column(order[0]).into_owned();
+    let minor: Vector3<f64> = eigen.eigenvectors.column(order[1]).into_owned();
+    let normal: Vector3<f64> = eigen.eigenvectors.column(order[2]).into_owned();
+    let along: Vec<f64> = points.iter().map(|p| (p - centroid).dot(&major)).collect();
+    let (lo, hi) = along
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &t| {
+            (lo.min(t), hi.max(t))
+        });
+    const SLICES: usize = 16;
+    let span = (hi - lo).max(f64::MIN_POSITIVE);
+    let slice_of = |t: f64| {
+        (((t - lo) / span) * SLICES as f64)
+            .floor()
+            .clamp(0.0, (SLICES - 1) as f64) as usize
+    };
+    let mut widths = vec![(f64::INFINITY, f64::NEG_INFINITY); SLICES];
+    for (p, t) in points.iter().zip(&along) {
+        let s = (p - centroid).dot(&minor);
+        let k = slice_of(*t);
+        widths[k] = (widths[k].0.min(s), widths[k].1.max(s));
+    }
+    // Slice centroids from points sampled uniformly on the surface (vertex centroids follow
+    // the mesh's tessellation, not its shape).
+    let mut rng = crate::util::rng::Rng::seed_from(1);
+    let mut sums = vec![(Vector3::zeros(), 0.0f64); SLICES];
+    for p in sample_positions(mesh, 200 * SLICES, &mut rng) {
+        let k = slice_of((p - centroid).dot(&major));
+        sums[k].0 += p.coords;
+        sums[k].1 += 1.0;
+    }
+    let raw: Vec<Point3<f64>> = sums
+        .iter()
+        .filter(|(_, w)| *w > 0.0)
+        .map(|(s, w)| Point3::from(s / *w))
+        .collect();
+    // A three-slice moving average across the leaf's width only: sampling noise would
+    // otherwise zigzag the midrib and lengthen it (bending lies along the normal and is kept).
+    let centroids: Vec<Point3<f64>> = (0..raw.len())
+        .map(|k| {
+            let window = &raw[k.saturating_sub(1)..(k + 2).min(raw.len())];
+            let mean_across = window
+                .iter()
+                .map(|p| (p - centroid).dot(&minor))
+                .sum::<f64>()
+                / window.len() as f64;
+            raw[k] + minor * (mean_across - (raw[k] - centroid).dot(&minor))
+        })
+        .collect();
+    let (Some(first), Some(last)) = (centroids.first(), centroids.last()) else {
+        return None;
+    };
+    // The midrib's ends: from the end slices' centroids, on along the midrib's direction
+    // there until the leaf's extent along its axis (at most two slices further).
+    let slice_width = span / SLICES as f64;
+    let extend = |end: &Point3<f64>, inner: Option<&Point3<f64>>, target: f64| {
+        let t_end = (end - centroid).dot(&major);
+        let outward = if target >= t_end { major } else { -major };
+        let direction = inner
+            .and_then(|q| (end - q).try_normalize(1e-12))
+            .filter(|d| d.dot(&outward) > 0.5)
+            .unwrap_or(outward);
+        let step = ((target - t_end) / direction.dot(&major))
+            .abs()
+            .min(2.0 * slice_width);
+        end + direction * step
+    };
+    let second_last = centroids
+        .len()
+        .checked_sub(2)
+        .and_then(|k| centroids.get(k));
+    let low_end = extend(first, centroids.get(1), lo);
+    let high_end = extend(last, second_last, hi);
+    let mut midrib = vec![low_end];
+    midrib.extend(centroids.iter().copied());
+    midrib.push(high_end);
+    let reference = base_world.unwrap_or(*axis_world);
+    let base_at_low = (low_end - reference).norm() <= (high_end - reference).norm();
+    let length: f64 = midrib.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+    let width = widths
+        .iter()
+        .filter(|(a, b)| a.is_finite() && b.is_finite())
+        .map(|(a, b)| b - a)
+        .fold(0.0, f64::max);
+    let perimeter: f64 = mesh
+        .boundary_edges()
+        .iter()
+        .map(|[a, b]| (points[*a as usize] - points[*b as usize]).norm())
+        .sum();
+    let (base, tip) = if base_at_low {
+        (low_end, high_end)
+    } else {
+        (high_end, low_end)
+    };
+    let inclination_deg = normal.dot(up).abs().clamp(0.0, 1.0).acos().to_degrees();
+    let (east, north) = horizontal_frame(up);
+    let direction = tip - base;
+    let azimuth_deg = direction
+        .dot(&north)
+        .atan2(direction.dot(&east))
+        .to_degrees()
+        .rem_euclid(360.0);
+    let deformation = (points
+        .iter()
+        .zip(&weights)
+        .map(|(p, w)| (p - centroid).dot(&normal).powi(2) * w)
+        .sum::<f64>()
+        / total)
+        .sqrt();
+    Some(LeafTraits {
+        area,
+        length,
+        width,
+        perimeter,
+        inclination_deg,
+        azimuth_deg,
+        base_world: base,
+        tip_world: tip,
+        normal_world: normal,
+        deformation,
+    })
+}
+
+/// `count` points uniformly distributed over a mesh's surface (positions only; triangles
+/// indexing past the vertices are skipped).
+fn sample_positions(
+    mesh: &TriMesh,
+    count: usize,
+    rng: &mut crate::util::rng::Rng,
+) -> Vec<Point3<f64>> {
+    let corners: Vec<[Point3<f64>; 3]> = mesh
+        .triangles
+        .iter()
+        .filter_map(|t| {
+            let c = t.map(|v| mesh.positions.get(v as usize).map(|p| p.cast::<f64>()));
+            Some([c[0]?, c[1]?, c[2]?])
+        })
+        .collect();
+    let mut cumulative = Vec::with_capacity(corners.len());
+    let mut total = 0.0;
+    for [a, b, c] in &corners {
+        total += 0.5 * (b - a).cross(&(c - a)).norm();
+        cumulative.push(total);
+    }
+    if !(total > 0.0) {
+        return Vec::new();
+    }
+    (0..count)
+        .map(|_| {
+            let target = rng.uniform() * total;
+            let t = cumulative
+                .partition_point(|&c| c < target)
+                .min(corners.len() - 1);
+            let [a, b, c] = corners[t];
+            let s = rng.uniform().sqrt();
+            let r = rng.uniform();
+            Point3::from(a.coords * (1.0 - s) + b.coords * (s * (1.0 - r)) + c.coords * (s * r))
+        })
+        .collect()
+}
+
+/// Point and unit tangent at arc-length fraction `s` ∈ [0, 1] of a polyline.
+fn polyline_at(line: &[[f64; 3]], s: f64) -> Option<(Point3<f64>, Vector3<f64>)> {
+    let points: Vec<Point3<f64>> = line.iter().map(|c| Point3::from(*c)).collect();
+    if points.len() < 2 {
+        return None;
+    }
+    let lengths: Vec<f64> = points.windows(2).map(|w| (w[1] - w[0]).norm()).collect();
+    let total: f64 = lengths.iter().sum();
+    if !(total > 0.0) {
+        return None;
+    }
+    let mut target = s.clamp(0.0, 1.0) * total;
+    for (k, l) in lengths.iter().enumerate() {
+        if target <= *l || k + 1 == lengths.len() {
+            let f = if *l > 0.0 {
+                (target / l).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let d = points[k + 1] - points[k];
+            let tangent = d.try_normalize(1e-15)?;
+            return Some((points[k] + d * f, tangent));
+        }
+        target -= l;
+    }
+    None
+}
+
+/// A branch's length: the spline's arc length when recorded, else its centreline's.
+pub fn branch_length(branch: &SkeletonRecord) -> f64 {
+    if branch.length > 0.0 {
+        branch.length
+    } else {
+        branch.centerline_length()
+    }
+}
+
+/// The direction a branch leaves its base: from its first point to the point a tenth of its
+/// length along (skipping the first sample's noise).
+fn initial_direction(branch: &SkeletonRecord) -> Option<Vector3<f64>> {
+    let (start, _) = polyline_at(&branch.centerline, 0.0)?;
+    let (ahead, _) = polyline_at(&branch.centerline, 0.1)?;
+    (ahead - start).try_normalize(1e-15)
+}
+
+/// Every trait of a plant. Angles in degrees; lengths, areas and volumes in metres when a
+/// scale is given, else in model units.
+pub fn plant_traits(organs: &PlantOrgans, scale: Option<&Scale>) -> TraitTable {
+    let units = Units {
+        factor: scale.map_or(1.0, |s| s.metres_per_unit),
+        metric: scale.is_some(),
+    };
+    let up = organs
+        .up_world
+        .try_normalize(1e-12)
+        .unwrap_or_else(Vector3::z);
+    let mut rows = Vec::new();
+    let mut push = |organ_id: &str, organ_type: &str, trait_name: &str, kind: Kind, value: f64| {
+        if value.is_finite() {
+            let (value, unit) = units.convert(kind, value);
+            rows.push(TraitRow {
+                plant: organs.plant.clone(),
+                organ_id: organ_id.to_owned(),
+                organ_type: organ_type.to_owned(),
+                trait_name: trait_name.to_owned(),
+                value,
+                unit,
+            });
+        }
+    };
+    // The plant's base: the root branch's start, else the lowest organ point.
+    let all_points: Vec<Point3<f64>> = organs
+        .leaves
+        .iter()
+        .flat_map(|l| l.mesh.positions.iter().map(|p| p.cast::<f64>()))
+        .chain(
+            organs
+                .branches
+                .iter()
+                .flat_map(|b| b.centerline.iter().map(|c| Point3::from(*c))),
+        )
+        .collect();
+    let root = organs
+        .branches
+        .iter()
+        .filter(|b| b.parent.is_none())
+        .max_by(|a, b| branch_length(a).total_cmp(&branch_length(b)));
+    let lowest = all_points
+        .iter()
+        .min_by(|a, b| a.coords.dot(&up).total_cmp(&b.coords.dot(&up)))
+        .copied()
+        .unwrap_or_else(Point3::origin);
+    let base_world = root
+        .and_then(|r| r.centerline.first().map(|c| Point3::from(*c)))
+        .unwrap_or(lowest);
+    let height_of = |p: &Point3<f64>| (p - base_world).dot(&up);
+
+    // Leaves.
+    let mut leaf_traits_by_id = BTreeMap::new();
+    for leaf in &organs.leaves {
+        let Some(t) = leaf_traits(&leaf.mesh, leaf.base_world, &base_world, &up) else {
+            continue;
+        };
+        let id = leaf_organ_id(leaf.id);
+        push(&id, "leaf", "area", Kind::Area, t.area);
+        push(&id, "leaf", "length", Kind::Length, t.length);
+        push(&id, "leaf", "width", Kind::Length, t.width);
+        push(&id, "leaf", "perimeter", Kind::Length, t.perimeter);
+        push(&id, "leaf", "inclination", Kind::Angle, t.inclination_deg);
+        push(&id, "leaf", "azimuth", Kind::Angle, t.azimuth_deg);
+        push(
+            &id,
+            "leaf",
+            "insertion_height",
+            Kind::Length,
+            height_of(&t.base_world),
+        );
+        push(&id, "leaf", "deformation", Kind::Length, t.deformation);
+        if let Some((branch, _)) = leaf.branch {
+            push(&id, "leaf", "branch", Kind::Id, branch as f64);
+        }
+        leaf_traits_by_id.insert(leaf.id, t);
+    }
+
+    // Branches.
+    let by_id: BTreeMap<u32, &SkeletonRecord> = organs.branches.iter().map(|b| (b.id, b)).collect();
+    for branch in &organs.branches {
+        let id = branch_organ_id(branch.id);
+        let kind = if branch.parent.is_none() {
+            "stem"
+        } else {
+            "branch"
+        };
+        push(&id, kind, "length", Kind::Length, branch_length(branch));
+        push(&id, kind, "base_radius", Kind::Length, branch.radius_start);
+        push(&id, kind, "tip_radius", Kind::Length, branch.radius_end);
+        if let Some(start) = branch.centerline.first() {
+            push(
+                &id,
+                kind,
+                "insertion_height",
+                Kind::Length,
+                height_of(&Point3::from(*start)),
+            );
+        }
+        let parent = branch.parent.and_then(|p| by_id.get(&p));
+        match (parent, initial_direction(branch)) {
+            (Some(parent), Some(direction)) => {
+                if let Some((_, tangent)) = polyline_at(&parent.centerline, branch.parent_fraction)
+                {
+                    let angle = tangent.dot(&direction).clamp(-1.0, 1.0).acos().to_degrees();
+                    push(&id, kind, "insertion_angle", Kind::Angle, angle);
+                }
+                push(&id, kind, "parent", Kind::Id, parent.id as f64);
+            }
+            (None, Some(direction)) => {
+                let angle = direction.dot(&up).clamp(-1.0, 1.0).acos().to_degrees();
+                push(&id, kind, "inclination", Kind::Angle, angle);
+            }
+            _ => {}
+        }
+    }
+
+    // Internodes and divergence angles along every axis, in insertion order: the organs
+    // inserted on it are its child branches and the leaves attached to it directly.
+    for axis in &organs.branches {
+        let mut inserted: Vec<(f64, Vector3<f64>)> = Vec::new();
+        for child in organs.branches.iter().filter(|b| b.parent == Some(axis.id)) {
+            if let Some(d) = initial_direction(child) {
+                inserted.push((child.parent_fraction, d));
+            }
+        }
+        for leaf in &organs.leaves {
+            if let (Some((branch, fraction)), Some(t)) =
+                (leaf.branch, leaf_traits_by_id.get(&leaf.id))
+                && branch == axis.id
+                && let Some(d) = (t.tip_world - t.base_world).try_normalize(1e-15)
+            {
+                inserted.push((fraction, d));
+            }
+        }
+        if inserted.len() < 2 {
+            continue;
+        }
+        inserted.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let length = branch_length(axis);
+        for (k, pair) in inserted.windows(2).enumerate() {
+            let organ_id = format!("{}/internode_{:02}", branch_organ_id(axis.id), k + 1);
+            push(
+                &organ_id,
+                "internode",
+                "length",
+                Kind::Length,
+                (pair[1].0 - pair[0].0) * length,
+            );
+            let at = 0.5 * (pair[0].0 + pair[1].0);
+            if let Some((_, tangent)) = polyline_at(&axis.centerline, at) {
+                let project =
+                    |d: &Vector3<f64>| (d - tangent * d.dot(&tangent)).try_normalize(1e-9);
+                if let (Some(a), Some(b)) = (project(&pair[0].1), project(&pair[1].1)) {
+                    let angle = a.dot(&b).clamp(-1.0, 1.0).acos().to_degrees();
+                    push(
+                        &organ_id,
+                        "internode",
+                        "divergence_angle",
+                        Kind::Angle,
+                        angle,
+                    );
+                }
+            }
+        }
+    }
+
+    // The whole plant.
+    let heights: Vec<f64> = all_points.iter().map(height_of).collect();
+    if let (Some(top), Some(bottom)) = (
+        heights.iter().copied().reduce(f64::max),
+        heights.iter().copied().reduce(f64::min),
+    ) {
+        push(
+            "plant",
+            "plant",
+            "height",
+            Kind::Length,
+            top - bottom.min(0.0),
+        );
+    }
+    let (east, north) = horizontal_frame(&up);
+    let horizontal: Vec<Point2<f64>> = all_points
+        .iter()
+        .map(|p| Point2::new(p.coords.dot(&east), p.coords.dot(&north)))
+        .collect();
+    push(
+        "plant",
+        "plant",
+        "crown_diameter",
+        Kind::Length,
+        hull::diameter_2d(&horizontal),
+    );
+    // At most 4,000 points for the hull: every k-th, in order.
+    let step = all_points.len().div_ceil(4000).max(1);
+    let sample: Vec<Point3<f64>> = all_points.iter().step_by(step).copied().collect();
+    push(
+        "plant",
+        "plant",
+        "convex_hull_volume",
+        Kind::Volume,
+        hull::hull_volume(&sample),
+    );
+    push(
+        "plant",
+        "plant",
+        "leaf_count",
+        Kind::Count,
+        leaf_traits_by_id.len() as f64,
+    );
+    push(
+        "plant",
+        "plant",
+        "total_leaf_area",
+        Kind::Area,
+        leaf_traits_by_id.values().map(|t| t.area).sum(),
+    );
+    let lengths: Vec<f64> = leaf_traits_by_id.values().map(|t| t.length).collect();
+    push(
+        "plant",
+        "plant",
+        "projected_leaf_area",
+        Kind::Area,
+        projected_area(&organs.leaves, &up, &lengths),
+    );
+    TraitTable {
+        format: TRAITS_FORMAT.into(),
+        version: TRAITS_VERSION,
+        plant: organs.plant.clone(),
+        scale: scale.cloned(),
+        up_world: up.into(),
+        rows,
+    }
+}
+
+/// Leaf area seen from above: the leaves' triangles projected on the horizontal plane and
+/// rasterized on a grid of cells 1/100 of the median leaf length (capped at 4096 cells a
+/// side), overlaps counted once.
+pub fn projected_area(leaves: &[LeafOrgan], up: &Vector3<f64>, leaf_lengths: &[f64]) -> f64 {
+    let (east, north) = horizontal_frame(up);
+    let project = |p: &Point3<f32>| {
+        let p = p.cast::<f64>();
+        Point2::new(p.coords.dot(&east), p.coords.dot(&north))
+    };
+    let triangles: Vec<[Point2<f64>; 3]> = leaves
+        .iter()
+        .flat_map(|l| {
+            l.mesh.triangles.iter().filter_map(|t| {
+                let c = t.map(|v| l.mesh.positions.get(v as usize).map(project));
+                Some([c[0]?, c[1]?, c[2]?])
+            })
+        })
+        .collect();
+    if triangles.is_empty() {
+        return 0.0;
+    }
+    let mut lo = Point2::new(f64::INFINITY, f64::INFINITY);
+    let mut hi = Point2::new(f64::NEG_INFINITY, f64::NEG_INFINITY);
+    for p in triangles.iter().flatten() {
+        lo = lo.inf(p);
+        hi = hi.sup(p);
+    }
+    let mut sorted = leaf_lengths.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+    let extent = (hi.x - lo.x).max(hi.y - lo.y);
+    if !(extent > 0.0) {
+        return 0.0;
+    }
+    let cell = (median / 100.0).max(extent / 4096.0);
+    let nx = ((hi.x - lo.x) / cell).ceil() as usize + 1;
+    let ny = ((hi.y - lo.y) / cell).ceil() as usize + 1;
+    let mut covered = vec![false; nx * ny];
+    for t in &triangles {
+        let edge = |a: &Point2<f64>, b: &Point2<f64>, p: &Point2<f64>| {
+            (b.x - a.x) * (p.y - a.y) - (b.y - a.y) * (p.x - a.x)
+        };
+        let area = edge(&t[0], &t[1], &t[2]);
+        if area.abs() < 1e-30 {
+            continue;
+        }
+        let (tlo, thi) = (t[0].inf(&t[1]).inf(&t[2]), t[0].sup(&t[1]).sup(&t[2]));
+        let x0 = ((tlo.x - lo.x) / cell).floor().max(0.0) as usize;
+        let x1 = (((thi.x - lo.x) / cell).ceil() as usize).min(nx - 1);
+        let y0 = ((tlo.y - lo.y) / cell).floor().max(0.0) as usize;
+        let y1 = (((thi.y - lo.y) / cell).ceil() as usize).min(ny - 1);
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let p = Point2::new(
+                    lo.x + (x as f64 + 0.5) * cell,
+                    lo.y + (y as f64 + 0.5) * cell,
+                );
+                let w = [
+                    edge(&t[1], &t[2], &p),
+                    edge(&t[2], &t[0], &p),
+                    edge(&t[0], &t[1], &p),
+                ];
+                if w.iter().all(|v| v * area.signum() >= 0.0) {
+                    covered[y * nx + x] = true;
+                }
+            }
+        }
+    }
+    covered.iter().filter(|c| **c).count() as f64 * cell * cell
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A flat rectangular leaf `length` × `width` in the plane through the origin spanned by
+    /// `along` and `across`, as a grid of quads.
+    pub(crate) fn rectangle(
+        origin: Point3<f64>,
+        along: Vector3<f64>,
+        across: Vector3<f64>,
+        length: f64,
+        width: f64,
+    ) -> TriMesh {
+        let (nu, nv) = (20usize, 8usize);
+        let mut mesh = TriMesh::default();
+        for i in 0..=nu {
+            for j in 0..=nv {
+                let p = origin
+                    + along * (length * i as f64 / nu as f64)
+                    + across * (width * (j as f64 / nv as f64 - 0.5));
+                mesh.positions.push(p.cast::<f32>());
+            }
+        }
+        let index = |i: usize, j: usize| (i * (nv + 1) + j) as u32;
+        for i in 0..nu {
+            for j in 0..nv {
+                mesh.triangles
+                    .push([index(i, j), index(i + 1, j), index(i + 1, j + 1)]);
+                mesh.triangles
+                    .push([index(i, j), index(i + 1, j + 1), index(i, j + 1)]);
+            }
+        }
+        mesh.compute_normals();
+        mesh
+    }
+
+    fn record(id: u32, parent: Option<u32>, fraction: f64, line: &[[f64; 3]]) -> SkeletonRecord {
+        SkeletonRecord {
+            id,
+            parent,
+            parent_fraction: fraction,
+            control_points: line.to_vec(),
+            radius_start: 0.01,
+            radius_end: 0.005,
+            length: 0.0,
+            centerline: line.to_vec(),
+        }
+    }
+
+    #[test]
+    fn a_tilted_rectangle_measures_its_size_and_angles() {
+        // 0.2 × 0.05, rising at 30° towards +y: its normal is 30° from vertical.
+        let tilt = 30f64.to_radians();
+        let along = Vector3::new(0.0, tilt.cos(), tilt.sin());
+        let mesh = rectangle(Point3::new(0.0, 0.1, 0.5), along, Vector3::x(), 0.2, 0.05);
+        let t = leaf_traits(
+            &mesh,
+            Some(Point3::new(0.0, 0.1, 0.5)),
+            &Point3::origin(),
+            &Vector3::z(),
+        )
+        .unwrap();
+        assert!((t.area - 0.01).abs() < 1e-6, "{t:?}");
+        assert!((t.length - 0.2).abs() < 0.001, "{t:?}");
+        assert!((t.width - 0.05).abs() < 0.0001, "{t:?}");
+        assert!((t.perimeter - 0.5).abs() < 1e-4, "{t:?}");
+        assert!((t.inclination_deg - 30.0).abs() < 0.01, "{t:?}");
+        // Base at y = 0.1, tip further along +y: azimuth 90° (north of east).
+        assert!((t.azimuth_deg - 90.0).abs() < 0.5, "{t:?}");
+        assert!(t.deformation < 1e-6, "{t:?}");
+    }
+
+    #[test]
+    fn a_bent_leaf_is_measured_along_its_midrib_and_is_deformed() {
+        // A leaf bent in a quarter circle of radius r: midrib length πr/2, chord r√2.
+        let r = 0.1;
+        let mut mesh = rectangle(Point3::origin(), Vector3::x(), Vector3::y(), 1.0, 0.04);
+        for p in &mut mesh.positions {
+            let angle = p.x as f64 * std::f64::consts::FRAC_PI_2;
+            p.x = (r * angle.sin()) as f32;
+            p.z = (r * (1.0 - angle.cos())) as f32;
+        }
+        let t = leaf_traits(
+            &mesh,
+            Some(Point3::origin()),
+            &Point3::origin(),
+            &Vector3::z(),
+        )
+        .unwrap();
+        let arc = r * std::f64::consts::FRAC_PI_2;
+        assert!((t.length - arc).abs() < 0.01 * arc, "{} vs {arc}", t.length);
+        assert!(t.deformation > 0.005, "{t:?}");
+    }
+
+    #[test]
+    fn units_follow_the_scale_and_say_so() {
+        let mesh = rectangle(
+            Point3::new(0.1, 0.0, 0.2),
+            Vector3::x(),
+            Vector3::y(),
+            0.2,
+            0.05,
+        );
+        let organs = PlantOrgans {
+            plant: "p1".into(),
+            up_world: Vector3::z(),
+            leaves: vec![LeafOrgan {
+                id: 4,
+                mesh,
+                base_world: None,
+                branch: Some((0, 0.8)),
+            }],
+            branches: vec![record(0, None, 0.0, &[[0.0, 0.0, 0.0], [0.0, 0.0, 0.3]])],
+        };
+        let model = plant_traits(&organs, None);
+        let area = model
+            .rows
+            .iter()
+            .find(|r| r.organ_id == "leaf_004" && r.trait_name == "area")
+            .unwrap();
+        assert_eq!(area.unit, "model units^2");
+        let scaled = plant_traits(&organs, Some(&Scale::factor(2.0).unwrap()));
+        let metric = scaled
+            .rows
+            .iter()
+            .find(|r| r.organ_id == "leaf_004" && r.trait_name == "area")
+            .unwrap();
+        assert_eq!(metric.unit, "m2");
+        assert!((metric.value - 4.0 * area.value).abs() < 1e-12);
+        assert_eq!(
+            scaled.value("leaf_004", "inclination"),
+            model.value("leaf_004", "inclination")
+        );
+        assert!((scaled.value("branch_000", "length").unwrap() - 0.6).abs() < 1e-12);
+        assert!((model.value("plant", "height").unwrap() - 0.3).abs() < 1e-6);
+        assert_eq!(model.value("plant", "leaf_count"), Some(1.0));
+        assert_eq!(model.value("leaf_004", "branch"), Some(0.0));
+        // Seen from above the flat leaf covers its own area (grid cells 1/100 of its length).
+        let projected = model.value("plant", "projected_leaf_area").unwrap();
+        assert!((projected - 0.01).abs() < 0.0005, "{projected}");
+    }
+
+    #[test]
+    fn phyllotaxis_along_a_stem_gives_internodes_and_divergence_angles() {
+        // A vertical stem with four branches every 0.1, turning 137.5° each.
+        let stem = record(0, None, 0.0, &[[0.0, 0.0, 0.0], [0.0, 0.0, 0.5]]);
+        let mut branches = vec![stem];
+        for k in 0..4u32 {
+            let fraction = 0.2 + 0.2 * k as f64;
+            let angle = (137.5 * k as f64).to_radians();
+            let start = [0.0, 0.0, 0.5 * fraction];
+            let end = [0.1 * angle.cos(), 0.1 * angle.sin(), 0.5 * fraction + 0.1];
+            branches.push(record(k + 1, Some(0), fraction, &[start, end]));
+        }
+        let organs = PlantOrgans {
+            plant: "p".into(),
+            up_world: Vector3::z(),
+            leaves: Vec::new(),
+            branches,
+        };
+        let table = plant_traits(&organs, None);
+        for k in 1..=3 {
+            let id = format!("branch_000/internode_{k:02}");
+            assert!((table.value(&id, "length").unwrap() - 0.1).abs() < 1e-9);
+            assert!((table.value(&id, "divergence_angle").unwrap() - 137.5).abs() < 1e-6);
+        }
+        // Each branch rises 45° from the stem.
+        assert!((table.value("branch_001", "insertion_angle").unwrap() - 45.0).abs() < 1e-6);
+        assert!((table.value("branch_002", "insertion_height").unwrap() - 0.2).abs() < 1e-9);
+        assert!(table.value("branch_000", "insertion_angle").is_none());
+    }
+
+    #[test]
+    fn scales_from_two_points_and_refuses_nonsense() {
+        let s = Scale::parse_two_points("0,0,0:3,4,0:0.5").unwrap();
+        assert!((s.metres_per_unit - 0.1).abs() < 1e-12);
+        assert!(Scale::parse_two_points("0,0,0:0,0,0:1").is_err());
+        assert!(Scale::parse_two_points("0,0:1,1,1:1").is_err());
+        assert!(Scale::parse_two_points("0,0,0:1,1,1:-1").is_err());
+        assert!(Scale::factor(0.0).is_err());
+        assert!(Scale::factor(f64::NAN).is_err());
+    }
+}
