@@ -135,6 +135,9 @@ enum Command {
         /// Segment a COLMAP folder's points as they are, however sparse.
         #[arg(long)]
         no_densify: bool,
+        /// The scale of the traits written at the end (traits.csv, traits.json).
+        #[command(flatten)]
+        scale: ScaleArgs,
     },
     /// Re-apply a project's edits headlessly, fit the leaves and write what `reconstruct`
     /// writes.
@@ -241,9 +244,79 @@ enum Command {
         /// (real COLMAP): the prediction is aligned to the truth by its camera centres.
         #[arg(long)]
         pred_model: Option<PathBuf>,
+        /// Score the plant's traits instead (leaf area, length, inclination, branch length;
+        /// the truth's traits computed by the same code from its meshes and branches).
+        #[arg(long, conflicts_with = "dense")]
+        traits: bool,
         #[arg(long)]
         json: bool,
     },
+    /// Measure a reconstruction's organs: `traits.csv` (long form: plant, organ_id,
+    /// organ_type, trait, value, unit) and `traits.json`, written into the folder (or --out).
+    Traits {
+        /// A `frond reconstruct` output folder.
+        reconstruction: PathBuf,
+        /// Plant id in the table (default: the folder's name).
+        #[arg(long)]
+        plant: Option<String>,
+        #[command(flatten)]
+        scale: ScaleArgs,
+        /// Where to write the two files (default: the reconstruction folder).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+}
+
+/// How model units become metres (COLMAP models are up to scale; without a scale every
+/// length is in "model units").
+#[derive(Args, Clone, Debug, Default)]
+struct ScaleArgs {
+    /// Metres per model unit.
+    #[arg(long, conflicts_with = "scale_from")]
+    scale: Option<f64>,
+    /// A known distance between two model points: X1,Y1,Z1:X2,Y2,Z2:METRES (e.g. two
+    /// corners of a marker or the ends of a ruler picked in the model).
+    #[arg(long)]
+    scale_from: Option<String>,
+}
+
+impl ScaleArgs {
+    fn scale(&self) -> Result<Option<frond::traits::Scale>> {
+        Ok(match (&self.scale, &self.scale_from) {
+            (Some(f), _) => Some(frond::traits::Scale::factor(*f)?),
+            (None, Some(text)) => Some(
+                frond::traits::Scale::parse_two_points(text)
+                    .with_context(|| format!("--scale-from {text}"))?,
+            ),
+            (None, None) => None,
+        })
+    }
+}
+
+fn plant_name(folder: &Path) -> String {
+    let canonical = folder
+        .canonicalize()
+        .unwrap_or_else(|_| folder.to_path_buf());
+    canonical
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "plant".to_owned())
+}
+
+fn traits(
+    reconstruction: &Path,
+    plant: Option<&str>,
+    scale: Option<frond::traits::Scale>,
+    out: Option<&Path>,
+) -> Result<frond::traits::TraitTable> {
+    let name = plant.map_or_else(|| plant_name(reconstruction), str::to_owned);
+    let organs = frond::traits::io::read_reconstruction(reconstruction, &name)
+        .with_context(|| format!("reading {}", reconstruction.display()))?;
+    let table = frond::traits::plant_traits(&organs, scale.as_ref());
+    let dir = out.unwrap_or(reconstruction);
+    frond::traits::io::write_traits(dir, &table)
+        .with_context(|| format!("writing traits into {}", dir.display()))?;
+    Ok(table)
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -1199,13 +1272,22 @@ fn main() -> Result<()> {
             fit,
             template,
             no_densify,
+            scale,
         } => {
+            let scale = scale.scale()?;
             let input = frond::pipeline::InputOptions {
                 sfm: sfm_args.options()?,
                 densify: dense.options()?,
                 auto_densify: !*no_densify,
             };
-            reconstruct(scene, &input, params, *fit, *template, out)
+            reconstruct(scene, &input, params, *fit, *template, out)?;
+            let table = traits(out, None, scale, None)?;
+            eprintln!(
+                "{} trait rows -> {}",
+                table.rows.len(),
+                out.join("traits.csv").display()
+            );
+            Ok(())
         }
         Command::Replay { project, out } => replay(project, out.as_deref()),
         Command::Scene {
@@ -1273,8 +1355,57 @@ fn main() -> Result<()> {
             gt,
             pred,
             pred_model,
+            dense: None,
+            traits: true,
+            json,
+        } => {
+            let pred = pred.as_deref().context("--traits needs --pred")?;
+            let accuracy =
+                frond::traits::accuracy::evaluate_traits(gt, pred, pred_model.as_deref())
+                    .with_context(|| format!("scoring the traits of {}", pred.display()))?;
+            if *json {
+                println!("{}", serde_json::to_string_pretty(&accuracy)?);
+            } else {
+                print!("{}", accuracy.to_text());
+            }
+            Ok(())
+        }
+        Command::Traits {
+            reconstruction,
+            plant,
+            scale,
+            out,
+        } => {
+            let table = traits(
+                reconstruction,
+                plant.as_deref(),
+                scale.scale()?,
+                out.as_deref(),
+            )?;
+            let leaves = table.value("plant", "leaf_count").unwrap_or(0.0);
+            let unit = if table.scale.is_some() {
+                "m"
+            } else {
+                "model units"
+            };
+            eprintln!(
+                "{} rows ({} leaves, lengths in {unit}) -> {}",
+                table.rows.len(),
+                leaves,
+                out.as_deref()
+                    .unwrap_or(reconstruction)
+                    .join("traits.csv")
+                    .display()
+            );
+            Ok(())
+        }
+        Command::Eval {
+            gt,
+            pred,
+            pred_model,
             dense,
             json,
+            ..
         } => match (pred, dense) {
             (_, Some(dense)) => eval_dense(gt, dense, *json),
             (Some(pred), None) => eval(gt, pred, pred_model.as_deref(), *json),

@@ -199,6 +199,86 @@ pub fn compare(
     (accuracy, gt_table, table)
 }
 
+/// Trait accuracy of a reconstruction output folder against a synthetic dataset: leaves
+/// paired by the evaluation's point matching; with `pred_model` (real COLMAP), the prediction
+/// is first aligned to the truth by its camera centres.
+pub fn evaluate_traits(
+    dataset: &std::path::Path,
+    out: &std::path::Path,
+    pred_model: Option<&std::path::Path>,
+) -> Result<TraitAccuracy, super::TraitsError> {
+    let eval_error =
+        |path: &std::path::Path, e: crate::eval::EvalError| super::TraitsError::Input {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        };
+    let truth = crate::eval::GroundTruth::load(dataset).map_err(|e| eval_error(dataset, e))?;
+    let mut prediction = crate::eval::Prediction::load(out).map_err(|e| eval_error(out, e))?;
+    let mut organs = super::io::read_reconstruction(out, "prediction")?;
+    let alignment = match pred_model {
+        Some(model) => {
+            let (similarity, report) = crate::eval::align_to_ground_truth(dataset, model)
+                .map_err(|e| eval_error(model, e))?;
+            prediction.transform(&similarity);
+            transform_organs(&mut organs, &similarity);
+            Some(report)
+        }
+        None => None,
+    };
+    let report = crate::eval::evaluate(
+        &truth,
+        &prediction,
+        alignment,
+        &crate::eval::EvalOptions::default(),
+    )
+    .map_err(|e| eval_error(out, e))?;
+    let pairs: Vec<(u32, u32)> = report
+        .leaf_geometry
+        .iter()
+        .filter(|g| g.gt_leaf >= 0 && g.segment >= 0)
+        .map(|g| (g.gt_leaf as u32, g.segment as u32))
+        .collect();
+    let gt_organs = super::io::read_ground_truth(dataset, "truth")?;
+    let (accuracy, _, _) = compare(&gt_organs, &organs, &pairs, truth.plant_height);
+    Ok(accuracy)
+}
+
+impl TraitAccuracy {
+    /// A short human-readable summary.
+    pub fn to_text(&self) -> String {
+        let median = |s: &Summary| s.median.map_or("-".to_owned(), |m| format!("{m:.4}"));
+        let mut text = String::new();
+        text.push_str(&format!(
+            "leaves compared: {} of {} true leaves
+",
+            self.leaves.len(),
+            self.gt_leaves
+        ));
+        text.push_str(&format!(
+            "  median leaf area error {} (relative), length error {} (relative), inclination error {} deg
+",
+            median(&self.leaf_area_relative_error),
+            median(&self.leaf_length_relative_error),
+            median(&self.leaf_inclination_error_deg)
+        ));
+        text.push_str(&format!(
+            "branches matched: {} of {} true branches; median length error {} (relative)
+",
+            self.branches.len(),
+            self.gt_branches,
+            median(&self.branch_length_relative_error)
+        ));
+        let optional = |v: Option<f64>| v.map_or("-".to_owned(), |v| format!("{v:.4}"));
+        text.push_str(&format!(
+            "plant height error {}, total leaf area error {} (relative)
+",
+            optional(self.plant_height_relative_error),
+            optional(self.total_leaf_area_relative_error)
+        ));
+        text
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -114,7 +114,7 @@ fn initial_tetrahedron(points: &[Point3<f64>]) -> Option<[usize; 4]> {
         return None;
     }
     let scale = bounding_diagonal(points);
-    if !(scale > 0.0) || !scale.is_finite() {
+    if !positive(scale) || !scale.is_finite() {
         return None;
     }
     let a = 0;
@@ -260,4 +260,9 @@ mod tests {
         assert_eq!(hull_2d(&points).len(), 4);
         assert_eq!(diameter_2d(&points[..1]), 0.0);
     }
+}
+
+/// `true` for a positive number (not NaN).
+fn positive(x: f64) -> bool {
+    x > 0.0
 }

@@ -103,7 +103,7 @@ impl Scale {
             .parse()
             .map_err(|_| TraitsError::Scale(format!("`{metres}` is not a distance in metres")))?;
         let units = (b - a).norm();
-        if !(units > 0.0) {
+        if !positive(units) {
             return Err(TraitsError::Scale(format!(
                 "`{text}`: the two points are the same"
             )));
@@ -249,13 +249,13 @@ pub fn leaf_traits(
     up: &Vector3<f64>,
 ) -> Option<LeafTraits> {
     let area = mesh.area();
-    if !(area > 0.0) || mesh.positions.is_empty() {
+    if !positive(area) || mesh.positions.is_empty() {
         return None;
     }
     let points: Vec<Point3<f64>> = mesh.positions.iter().map(|p| p.cast::<f64>()).collect();
     let weights = vertex_weights(mesh);
     let total: f64 = weights.iter().sum();
-    if !(total > 0.0) {
+    if !positive(total) {
         return None;
     }
     let centroid = Point3::from(
@@ -418,7 +418,7 @@ fn sample_positions(
         total += 0.5 * (b - a).cross(&(c - a)).norm();
         cumulative.push(total);
     }
-    if !(total > 0.0) {
+    if !positive(total) {
         return Vec::new();
     }
     (0..count)
@@ -443,7 +443,7 @@ fn polyline_at(line: &[[f64; 3]], s: f64) -> Option<(Point3<f64>, Vector3<f64>)>
     }
     let lengths: Vec<f64> = points.windows(2).map(|w| (w[1] - w[0]).norm()).collect();
     let total: f64 = lengths.iter().sum();
-    if !(total > 0.0) {
+    if !positive(total) {
         return None;
     }
     let mut target = s.clamp(0.0, 1.0) * total;
@@ -747,7 +747,7 @@ pub fn projected_area(leaves: &[LeafOrgan], up: &Vector3<f64>, leaf_lengths: &[f
     sorted.sort_by(f64::total_cmp);
     let median = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
     let extent = (hi.x - lo.x).max(hi.y - lo.y);
-    if !(extent > 0.0) {
+    if !positive(extent) {
         return 0.0;
     }
     let cell = (median / 100.0).max(extent / 4096.0);
@@ -969,4 +969,9 @@ mod tests {
         assert!(Scale::factor(0.0).is_err());
         assert!(Scale::factor(f64::NAN).is_err());
     }
+}
+
+/// `true` for a positive number (not NaN).
+fn positive(x: f64) -> bool {
+    x > 0.0
 }
