@@ -193,6 +193,11 @@ pub fn hull_2d(points: &[Point2<f64>]) -> Vec<Point2<f64>> {
     hull
 }
 
+/// `true` for a positive number (not NaN).
+fn positive(x: f64) -> bool {
+    x > 0.0
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -260,9 +265,4 @@ mod tests {
         assert_eq!(hull_2d(&points).len(), 4);
         assert_eq!(diameter_2d(&points[..1]), 0.0);
     }
-}
-
-/// `true` for a positive number (not NaN).
-fn positive(x: f64) -> bool {
-    x > 0.0
 }

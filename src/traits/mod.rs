@@ -787,6 +787,11 @@ pub fn projected_area(leaves: &[LeafOrgan], up: &Vector3<f64>, leaf_lengths: &[f
     covered.iter().filter(|c| **c).count() as f64 * cell * cell
 }
 
+/// `true` for a positive number (not NaN).
+fn positive(x: f64) -> bool {
+    x > 0.0
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -969,9 +974,4 @@ mod tests {
         assert!(Scale::factor(0.0).is_err());
         assert!(Scale::factor(f64::NAN).is_err());
     }
-}
-
-/// `true` for a positive number (not NaN).
-fn positive(x: f64) -> bool {
-    x > 0.0
 }
