@@ -22,6 +22,7 @@
 //! - [`synth`]: synthetic plants with ground truth; [`eval`]: scoring reconstructions.
 //! - [`util`]: atomic file output, deterministic random numbers, statistics, progress.
 
+pub mod batch;
 pub mod branch;
 pub mod ecosystem;
 pub mod edit;

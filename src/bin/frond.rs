@@ -251,6 +251,23 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Reconstruct and measure many plants: a manifest (CSV: plant,input[,scale,scale_from,
+    /// no_densify]) -> one folder per plant, a combined traits.csv, leaf_area.png and
+    /// batch.json. Resumable: complete plants are skipped, interrupted ones redone.
+    Batch {
+        /// The manifest CSV.
+        manifest: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
+        /// Plants at a time (default: the cores, fewer when memory is short: about 3 GiB
+        /// per plant).
+        #[arg(long)]
+        jobs: Option<usize>,
+        #[command(flatten)]
+        sfm: SfmArgs,
+        #[command(flatten)]
+        dense: DensifyArgs,
+    },
     /// Measure a reconstruction's organs: `traits.csv` (long form: plant, organ_id,
     /// organ_type, trait, value, unit) and `traits.json`, written into the folder (or --out).
     Traits {
@@ -548,6 +565,96 @@ impl Progress for BarProgress {
     fn advance(&self, units: u64) {
         self.bar.inc(units);
     }
+}
+
+/// Shows a batch's progress: a bar over plants, and each running plant's stage.
+struct BatchBar {
+    bar: ProgressBar,
+    running: std::sync::Mutex<std::collections::BTreeMap<String, String>>,
+}
+
+impl BatchBar {
+    fn show(&self) {
+        if let Ok(running) = self.running.lock() {
+            let message: Vec<String> = running.iter().map(|(p, s)| format!("{p}: {s}")).collect();
+            self.bar.set_message(message.join(" | "));
+        }
+    }
+}
+
+impl frond::batch::BatchProgress for BatchBar {
+    fn plants(&self, total: usize) {
+        self.bar.set_length(total as u64);
+    }
+    fn plant_stage(&self, plant: &str, stage: &str) {
+        if let Ok(mut running) = self.running.lock() {
+            running.insert(plant.to_owned(), stage.to_owned());
+        }
+        self.show();
+    }
+    fn plant_finished(&self, plant: &str, status: frond::batch::PlantStatus) {
+        if let Ok(mut running) = self.running.lock() {
+            running.remove(plant);
+        }
+        self.bar.inc(1);
+        self.bar
+            .println(format!("{plant}: {status:?}").to_lowercase());
+        self.show();
+    }
+}
+
+fn batch(
+    manifest: &Path,
+    out: &Path,
+    jobs: Option<usize>,
+    input: frond::pipeline::InputOptions,
+) -> Result<()> {
+    let entries = frond::batch::read_manifest(manifest)?;
+    let options = frond::batch::BatchOptions {
+        jobs: jobs.unwrap_or_else(|| frond::batch::default_jobs(3 << 30)),
+        input,
+        reconstruct: ReconstructOptions::default(),
+    };
+    let bar = ProgressBar::new(entries.len() as u64);
+    bar.set_style(
+        ProgressStyle::with_template("plants [{bar:30}] {pos}/{len} [{elapsed}] {wide_msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    bar.enable_steady_tick(Duration::from_millis(200));
+    let progress = BatchBar {
+        bar,
+        running: Default::default(),
+    };
+    let report = frond::batch::run_batch(manifest, &entries, out, &options, &progress)
+        .with_context(|| format!("batch {} into {}", manifest.display(), out.display()))?;
+    progress.bar.finish_and_clear();
+    for plant in report.plants.iter().filter(|p| p.error.is_some()) {
+        eprintln!(
+            "{} failed: {}",
+            plant.plant,
+            plant.error.as_deref().unwrap_or("")
+        );
+    }
+    eprintln!(
+        "{} done, {} skipped, {} failed of {} plants in {:.1} s ({} at a time) -> {}",
+        report.done,
+        report.skipped,
+        report.failed,
+        report.plants.len(),
+        report.seconds,
+        report.jobs,
+        out.display()
+    );
+    if report.failed > 0 {
+        bail!(
+            "{} of {} plants failed (see {})",
+            report.failed,
+            report.plants.len(),
+            out.join("batch.json").display()
+        );
+    }
+    Ok(())
 }
 
 /// Where the scene is: a folder in any supported layout, or an explicit model (+ images).
@@ -1370,6 +1477,22 @@ fn main() -> Result<()> {
             }
             Ok(())
         }
+        Command::Batch {
+            manifest,
+            out,
+            jobs,
+            sfm: sfm_args,
+            dense,
+        } => batch(
+            manifest,
+            out,
+            *jobs,
+            frond::pipeline::InputOptions {
+                sfm: sfm_args.options()?,
+                densify: dense.options()?,
+                auto_densify: true,
+            },
+        ),
         Command::Traits {
             reconstruction,
             plant,
