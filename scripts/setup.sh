@@ -77,4 +77,22 @@ if ! [ -d "$root/.tools/py/pygltflib-$PYGLTFLIB_VERSION.dist-info" ]; then
   python3 -m pip install --quiet --disable-pip-version-check --no-warn-script-location --root-user-action=ignore \
     --target "$root/.tools/py" "pygltflib==$PYGLTFLIB_VERSION"
 fi
+# Snakemake, the workflow engine of workflow/Snakefile (many plants, local or on a cluster),
+# with the Slurm and Kubernetes executors and the fs storage plugin its profiles use. Run it
+# through scripts/snakemake.sh.
+SNAKEMAKE_VERSION="9.27.1"
+SNAKEMAKE_PACKAGES=(
+  "snakemake==$SNAKEMAKE_VERSION"
+  "snakemake-executor-plugin-slurm==2.8.0"
+  "snakemake-executor-plugin-kubernetes==0.5.1"
+  "snakemake-storage-plugin-fs==1.1.3"
+)
+snakemake_stamp="$root/.tools/snakemake/.frond-pins"
+if [ "$(cat "$snakemake_stamp" 2>/dev/null)" != "${SNAKEMAKE_PACKAGES[*]}" ]; then
+  echo "setup.sh: installing ${SNAKEMAKE_PACKAGES[*]} into .tools/snakemake"
+  rm -rf "$root/.tools/snakemake"
+  python3 -m pip install --quiet --disable-pip-version-check --no-warn-script-location --root-user-action=ignore \
+    --target "$root/.tools/snakemake" "${SNAKEMAKE_PACKAGES[@]}"
+  echo "${SNAKEMAKE_PACKAGES[*]}" >"$snakemake_stamp"
+fi
 echo "setup.sh: done"

@@ -20,7 +20,7 @@ use serde::{Deserialize, Serialize};
 pub use manifest::{ManifestEntry, read_manifest};
 
 use crate::pipeline::{InputOptions, ReconstructOptions};
-use crate::traits::TraitRow;
+use crate::traits::{TraitRow, TraitTable};
 use crate::traits::io::{TRAITS_JSON, read_traits, write_traits};
 use crate::util::atomic::write_atomic;
 use crate::util::progress::Progress;
@@ -245,31 +245,15 @@ pub fn run_batch(
         .flatten()
         .collect();
     // The combined table and the plot, from every complete plant in manifest order.
-    let mut rows: Vec<TraitRow> = Vec::new();
-    let mut units = Vec::new();
-    for record in &plants {
-        if record.status == PlantStatus::Failed {
-            continue;
-        }
-        let path = out.join(&record.plant).join(TRAITS_JSON);
-        if let Ok(table) = read_traits(&path) {
-            units.push(table.scale.is_some());
-            rows.extend(table.rows);
-        }
-    }
-    let csv_path = out.join(COMBINED_CSV);
-    write_atomic(&csv_path, crate::traits::io::csv_text(&rows).as_bytes())
-        .map_err(|e| output_error(&csv_path, e))?;
-    let mut files = vec![COMBINED_CSV.to_owned()];
-    let png_path = out.join(LEAF_AREA_PNG);
-    let metric = !units.is_empty() && units.iter().all(|m| *m);
-    match plot::leaf_area_plot(&rows, metric) {
-        Ok(png) => {
-            write_atomic(&png_path, &png).map_err(|e| output_error(&png_path, e))?;
-            files.push(LEAF_AREA_PNG.to_owned());
-        }
-        Err(e) => tracing::warn!("no leaf area plot: {e}"),
-    }
+    let tables: Vec<TraitTable> = plants
+        .iter()
+        .filter(|record| record.status != PlantStatus::Failed)
+        .filter_map(|record| read_traits(&out.join(&record.plant).join(TRAITS_JSON)).ok())
+        .collect();
+    let files = write_combined(&tables, &out.join(COMBINED_CSV), &out.join(LEAF_AREA_PNG))?
+        .iter()
+        .map(|p| p.strip_prefix(out).unwrap_or(p).display().to_string())
+        .collect();
     let count = |s: PlantStatus| plants.iter().filter(|p| p.status == s).count();
     let report = BatchReport {
         format: BATCH_FORMAT.into(),
@@ -287,6 +271,29 @@ pub fn run_batch(
     let text = serde_json::to_string_pretty(&report).map_err(|e| output_error(&json_path, e))?;
     write_atomic(&json_path, text.as_bytes()).map_err(|e| output_error(&json_path, e))?;
     Ok(report)
+}
+
+/// Writes the combined long table of several plants (CSV, header once) and, when any leaf
+/// has an area, the leaf-area plot (values in cm² when every table has a scale). Returns the
+/// files written.
+pub fn write_combined(
+    tables: &[TraitTable],
+    csv_path: &Path,
+    png_path: &Path,
+) -> Result<Vec<PathBuf>, BatchError> {
+    let rows: Vec<TraitRow> = tables.iter().flat_map(|t| t.rows.iter().cloned()).collect();
+    write_atomic(csv_path, crate::traits::io::csv_text(&rows).as_bytes())
+        .map_err(|e| output_error(csv_path, e))?;
+    let mut files = vec![csv_path.to_path_buf()];
+    let metric = !tables.is_empty() && tables.iter().all(|t| t.scale.is_some());
+    match plot::leaf_area_plot(&rows, metric) {
+        Ok(png) => {
+            write_atomic(png_path, &png).map_err(|e| output_error(png_path, e))?;
+            files.push(png_path.to_path_buf());
+        }
+        Err(e) => tracing::warn!("no leaf area plot: {e}"),
+    }
+    Ok(files)
 }
 
 fn one_plant(

@@ -257,8 +257,12 @@ enum Command {
     Batch {
         /// The manifest CSV.
         manifest: PathBuf,
+        #[arg(long, required_unless_present = "list")]
+        out: Option<PathBuf>,
+        /// Print the manifest's plants as JSON (plant, input, photos, scale, no_densify) and
+        /// stop: what the Snakemake workflow reads.
         #[arg(long)]
-        out: PathBuf,
+        list: bool,
         /// Plants at a time (default: the cores, fewer when memory is short: about 3 GiB
         /// per plant).
         #[arg(long)]
@@ -267,6 +271,17 @@ enum Command {
         sfm: SfmArgs,
         #[command(flatten)]
         dense: DensifyArgs,
+    },
+    /// Combine plants' traits.json files into one long table (CSV) and a leaf-area plot.
+    Gather {
+        /// traits.json files, one per plant.
+        #[arg(required = true)]
+        tables: Vec<PathBuf>,
+        #[arg(long)]
+        out: PathBuf,
+        /// The leaf-area plot (PNG).
+        #[arg(long)]
+        plot: PathBuf,
     },
     /// Measure a reconstruction's organs: `traits.csv` (long form: plant, organ_id,
     /// organ_type, trait, value, unit) and `traits.json`, written into the folder (or --out).
@@ -1478,14 +1493,46 @@ fn main() -> Result<()> {
             Ok(())
         }
         Command::Batch {
+            manifest, list: true, ..
+        } => {
+            let entries = frond::batch::read_manifest(manifest)?;
+            let plants: Vec<serde_json::Value> = entries
+                .iter()
+                .map(|e| {
+                    serde_json::json!({
+                        "plant": e.plant,
+                        "input": e.input,
+                        "photos": frond::pipeline::is_photo_folder(&e.input),
+                        "scale": e.scale.as_ref().map(|s| s.metres_per_unit),
+                        "no_densify": e.no_densify,
+                    })
+                })
+                .collect();
+            println!("{}", serde_json::to_string_pretty(&plants)?);
+            Ok(())
+        }
+        Command::Gather { tables, out, plot } => {
+            let mut read = Vec::with_capacity(tables.len());
+            for path in tables {
+                read.push(
+                    frond::traits::io::read_traits(path)
+                        .with_context(|| format!("reading {}", path.display()))?,
+                );
+            }
+            frond::batch::write_combined(&read, out, plot)?;
+            eprintln!("{} plants -> {}", read.len(), out.display());
+            Ok(())
+        }
+        Command::Batch {
             manifest,
             out,
             jobs,
             sfm: sfm_args,
             dense,
+            ..
         } => batch(
             manifest,
-            out,
+            out.as_deref().context("--out is required")?,
             *jobs,
             frond::pipeline::InputOptions {
                 sfm: sfm_args.options()?,

@@ -12,10 +12,13 @@ struct Face {
     alive: bool,
 }
 
+/// A face through three points. A degenerate face (collinear points) keeps a zero normal:
+/// it is never seen from a point, and it closes the surface without enclosing anything.
 fn face(points: &[Point3<f64>], v: [usize; 3]) -> Face {
     let normal = (points[v[1]] - points[v[0]])
         .cross(&(points[v[2]] - points[v[0]]))
-        .normalize();
+        .try_normalize(1e-300)
+        .unwrap_or_else(Vector3::zeros);
     Face {
         v,
         normal,
@@ -27,11 +30,44 @@ fn face(points: &[Point3<f64>], v: [usize; 3]) -> Face {
 /// The volume of the convex hull of `points` (0 when they are fewer than four or flat).
 /// `O(n·h)`: callers pass a few thousand points at most.
 pub fn hull_volume(points: &[Point3<f64>]) -> f64 {
+    // Exact duplicates (shared mesh vertices) would only add degenerate faces.
+    let mut unique: Vec<Point3<f64>> = points
+        .iter()
+        .filter(|p| p.coords.iter().all(|c| c.is_finite()))
+        .copied()
+        .collect();
+    unique.sort_by(|a, b| {
+        a.x.total_cmp(&b.x)
+            .then(a.y.total_cmp(&b.y))
+            .then(a.z.total_cmp(&b.z))
+    });
+    unique.dedup();
+    // Leaf meshes are planar patches: coplanar points make the visible region of a new point
+    // ambiguous. Each point is moved by at most 1e-7 of the bounding diagonal, by a hash of
+    // its coordinates (so the result does not depend on the order of the points), which puts
+    // them in general position at a volume error far below any measurement's.
+    if initial_tetrahedron(&unique).is_none() {
+        return 0.0;
+    }
+    let scale = bounding_diagonal(&unique);
+    let jittered: Vec<Point3<f64>> = unique
+        .iter()
+        .map(|p| {
+            let mut rng = crate::util::rng::Rng::seed_from(
+                p.x.to_bits() ^ p.y.to_bits().rotate_left(21) ^ p.z.to_bits().rotate_left(42),
+            );
+            let mut offset = [0.0; 3];
+            for o in &mut offset {
+                *o = (rng.uniform() - 0.5) * 2e-7 * scale;
+            }
+            p + Vector3::from(offset)
+        })
+        .collect();
+    let points = jittered.as_slice();
     let Some(start) = initial_tetrahedron(points) else {
         return 0.0;
     };
-    let scale = bounding_diagonal(points);
-    let eps = 1e-9 * scale.max(f64::MIN_POSITIVE);
+    let eps = 1e-13 * scale.max(f64::MIN_POSITIVE);
     let interior = Point3::from(
         start
             .iter()
@@ -78,10 +114,7 @@ pub fn hull_volume(points: &[Point3<f64>]) -> f64 {
             faces[k].alive = false;
         }
         for (x, y) in horizon {
-            let f = face(points, [x, y, p]);
-            if f.normal.iter().all(|c| c.is_finite()) {
-                faces.push(f);
-            }
+            faces.push(face(points, [x, y, p]));
         }
         if faces.len() > 64 && faces.iter().filter(|f| f.alive).count() * 2 < faces.len() {
             faces.retain(|f| f.alive);
@@ -138,7 +171,8 @@ fn initial_tetrahedron(points: &[Point3<f64>]) -> Option<[usize; 4]> {
         let dj = n.dot(&(points[j] - points[a])).abs();
         di.total_cmp(&dj)
     })?;
-    if n.dot(&(points[d] - points[a])).abs() <= 1e-9 * scale * scale * scale {
+    // Flatter than a millionth of the size (well above the jitter below) counts as flat.
+    if n.dot(&(points[d] - points[a])).abs() <= 1e-6 * scale * scale * scale {
         return None;
     }
     Some([a, b, c, d])
@@ -224,7 +258,8 @@ mod tests {
         // Shuffled, so the extreme points do not come first.
         points.reverse();
         let volume = hull_volume(&points);
-        assert!((volume - 3.0).abs() < 1e-9, "{volume}");
+        // Within the general-position jitter (1e-7 of the size).
+        assert!((volume - 3.0).abs() < 1e-5, "{volume}");
     }
 
     #[test]
@@ -240,6 +275,43 @@ mod tests {
         let volume = hull_volume(&points);
         // An inscribed polytope: slightly smaller than the ball, never larger.
         assert!(volume < ball && volume > 0.97 * ball, "{volume} vs {ball}");
+    }
+
+    /// Planar patches with shared (duplicate) vertices, as leaf meshes give: the volume does
+    /// not depend on the order of the points and stays inside the bounding box.
+    #[test]
+    fn coplanar_patches_and_duplicates_give_an_order_independent_volume() {
+        let mut rng = Rng::seed_from(11);
+        for round in 0..20 {
+            let mut points = Vec::new();
+            for _ in 0..8 {
+                let origin = Vector3::new(rng.normal(), rng.normal(), rng.normal());
+                let u = Vector3::new(rng.normal(), rng.normal(), rng.normal()).normalize();
+                let v = u.cross(&Vector3::new(rng.normal(), rng.normal(), rng.normal())).normalize();
+                for i in 0..=10 {
+                    for j in 0..=6 {
+                        let p = origin + u * (0.05 * i as f64) + v * (0.03 * j as f64);
+                        points.push(Point3::from(p.map(|c| c as f32 as f64)));
+                        if (i + j) % 3 == 0 {
+                            points.push(points[points.len() - 1]);
+                        }
+                    }
+                }
+            }
+            let volume = hull_volume(&points);
+            let mut lo = Vector3::repeat(f64::INFINITY);
+            let mut hi = Vector3::repeat(f64::NEG_INFINITY);
+            for p in &points {
+                lo = lo.inf(&p.coords);
+                hi = hi.sup(&p.coords);
+            }
+            let bbox = (hi - lo).product();
+            assert!(volume > 0.0 && volume <= bbox, "round {round}: {volume} vs box {bbox}");
+            let mut shuffled = points.clone();
+            rng.shuffle(&mut shuffled);
+            let again = hull_volume(&shuffled);
+            assert!((again - volume).abs() <= 1e-9 * bbox, "round {round}: {again} vs {volume}");
+        }
     }
 
     #[test]
