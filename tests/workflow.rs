@@ -15,9 +15,13 @@ fn root() -> PathBuf {
 
 /// Whether the pinned Snakemake is installed; on CI (CI=true) its absence is a failure.
 fn snakemake_available() -> bool {
-    let found = root().join(".tools/snakemake/snakemake/__init__.py").is_file();
+    let found = root()
+        .join(".tools/snakemake/snakemake/__init__.py")
+        .is_file();
     if !found && std::env::var("CI").is_ok_and(|v| v == "true") {
-        panic!("Snakemake is not in .tools/snakemake on CI: scripts/setup.sh should have installed it");
+        panic!(
+            "Snakemake is not in .tools/snakemake on CI: scripts/setup.sh should have installed it"
+        );
     }
     if !found {
         eprintln!("skipping: Snakemake is not installed (run scripts/setup.sh)");
@@ -44,7 +48,10 @@ fn snakemake(dir: &Path, args: &[&str]) -> String {
         String::from_utf8_lossy(&output.stdout),
         String::from_utf8_lossy(&output.stderr)
     );
-    assert!(output.status.success(), "snakemake {args:?} failed:\n{text}");
+    assert!(
+        output.status.success(),
+        "snakemake {args:?} failed:\n{text}"
+    );
     text
 }
 
@@ -82,8 +89,12 @@ fn the_workflow_runs_plants_gathers_them_and_redoes_only_what_is_missing() {
             target_points: 20_000,
             ..SynthOptions::default()
         };
-        write_dataset(&options, &dir.path().join(format!("plants/p{seed}")), &NoProgress)
-            .unwrap();
+        write_dataset(
+            &options,
+            &dir.path().join(format!("plants/p{seed}")),
+            &NoProgress,
+        )
+        .unwrap();
     }
     std::fs::write(
         dir.path().join("plants.csv"),
@@ -125,7 +136,10 @@ fn the_workflow_runs_plants_gathers_them_and_redoes_only_what_is_missing() {
         assert_eq!(jobs_of(&third, rule), 1, "{rule}:\n{third}");
     }
     assert_eq!(modified(&results.join("p1/traits.json")), p1_traits);
-    assert_eq!(std::fs::read_to_string(results.join("traits.csv")).unwrap(), table);
+    assert_eq!(
+        std::fs::read_to_string(results.join("traits.csv")).unwrap(),
+        table
+    );
 }
 
 #[test]
@@ -183,6 +197,9 @@ fn the_cluster_profiles_plan_every_stage_of_a_photo_plant_and_a_colmap_plant() {
         assert_eq!(jobs_of(&plan, "densify"), 2, "{profile}:\n{plan}");
         assert_eq!(jobs_of(&plan, "traits"), 2, "{profile}:\n{plan}");
         assert_eq!(jobs_of(&plan, "gather"), 1, "{profile}:\n{plan}");
-        assert!(!dir.path().join("results").exists(), "a dry run wrote results");
+        assert!(
+            !dir.path().join("results").exists(),
+            "a dry run wrote results"
+        );
     }
 }

@@ -20,8 +20,8 @@ use serde::{Deserialize, Serialize};
 pub use manifest::{ManifestEntry, read_manifest};
 
 use crate::pipeline::{InputOptions, ReconstructOptions};
-use crate::traits::{TraitRow, TraitTable};
 use crate::traits::io::{TRAITS_JSON, read_traits, write_traits};
+use crate::traits::{TraitRow, TraitTable};
 use crate::util::atomic::write_atomic;
 use crate::util::progress::Progress;
 

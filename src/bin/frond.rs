@@ -1493,7 +1493,9 @@ fn main() -> Result<()> {
             Ok(())
         }
         Command::Batch {
-            manifest, list: true, ..
+            manifest,
+            list: true,
+            ..
         } => {
             let entries = frond::batch::read_manifest(manifest)?;
             let plants: Vec<serde_json::Value> = entries

@@ -287,7 +287,9 @@ mod tests {
             for _ in 0..8 {
                 let origin = Vector3::new(rng.normal(), rng.normal(), rng.normal());
                 let u = Vector3::new(rng.normal(), rng.normal(), rng.normal()).normalize();
-                let v = u.cross(&Vector3::new(rng.normal(), rng.normal(), rng.normal())).normalize();
+                let v = u
+                    .cross(&Vector3::new(rng.normal(), rng.normal(), rng.normal()))
+                    .normalize();
                 for i in 0..=10 {
                     for j in 0..=6 {
                         let p = origin + u * (0.05 * i as f64) + v * (0.03 * j as f64);
@@ -306,11 +308,17 @@ mod tests {
                 hi = hi.sup(&p.coords);
             }
             let bbox = (hi - lo).product();
-            assert!(volume > 0.0 && volume <= bbox, "round {round}: {volume} vs box {bbox}");
+            assert!(
+                volume > 0.0 && volume <= bbox,
+                "round {round}: {volume} vs box {bbox}"
+            );
             let mut shuffled = points.clone();
             rng.shuffle(&mut shuffled);
             let again = hull_volume(&shuffled);
-            assert!((again - volume).abs() <= 1e-9 * bbox, "round {round}: {again} vs {volume}");
+            assert!(
+                (again - volume).abs() <= 1e-9 * bbox,
+                "round {round}: {again} vs {volume}"
+            );
         }
     }
 
