@@ -447,3 +447,81 @@ fn every_output_file_reads_back_through_its_one_reader_type() {
         .to_string();
     assert!(error.contains("segments.json"), "{error}");
 }
+
+/// `frond reconstruct` ends with the plant's traits in model units; `frond traits` with a
+/// scale rewrites them in metres; `frond eval --traits` compares them with the truth's.
+#[test]
+fn reconstruct_writes_traits_and_traits_follow_the_scale() {
+    let out = reconstruction();
+    let table = read_json(&out.join("traits.json"));
+    assert_eq!(table["format"], "frond traits");
+    assert!(table["scale"].is_null());
+    let csv = std::fs::read_to_string(out.join("traits.csv")).unwrap();
+    assert!(csv.starts_with("plant,organ_id,organ_type,trait,value,unit\n"));
+    let value = |text: &str, organ: &str, name: &str| -> (f64, String) {
+        let line = text
+            .lines()
+            .find(|l| {
+                let f: Vec<&str> = l.split(',').collect();
+                f.len() == 6 && f[1] == organ && f[3] == name
+            })
+            .unwrap_or_else(|| panic!("no {organ} {name}"));
+        let f: Vec<&str> = line.split(',').collect();
+        (f[4].parse().unwrap(), f[5].to_owned())
+    };
+    let (area, unit) = value(&csv, "plant", "total_leaf_area");
+    assert_eq!(unit, "model units^2");
+    let (count, _) = value(&csv, "plant", "leaf_count");
+    let report = read_json(&out.join("report.json"));
+    assert!(count >= report["counts"]["leaves_fitted"].as_f64().unwrap());
+
+    let scaled = tempfile::tempdir().unwrap();
+    cargo_bin_cmd!("frond")
+        .args(["traits", "--scale", "0.5", "--plant", "pot 7, left", "--out"])
+        .arg(scaled.path())
+        .arg(out)
+        .assert()
+        .success();
+    let scaled_csv = std::fs::read_to_string(scaled.path().join("traits.csv")).unwrap();
+    // The plant id with a comma is quoted; values are scaled by 0.5 (lengths) and 0.25 (areas).
+    assert!(scaled_csv.lines().nth(1).unwrap().starts_with("\"pot 7, left\","));
+    let scaled_value = |organ: &str, name: &str| -> (f64, String) {
+        let line = scaled_csv
+            .lines()
+            .find(|l| l.contains(&format!(",{organ},")) && l.contains(&format!(",{name},")))
+            .unwrap();
+        let f: Vec<&str> = line.rsplitn(3, ',').collect();
+        (f[1].parse().unwrap(), f[0].to_owned())
+    };
+    let (metric_area, unit) = scaled_value("plant", "total_leaf_area");
+    assert_eq!(unit, "m2");
+    assert!((metric_area - 0.25 * area).abs() <= 1e-9 * area.max(1.0));
+    let (height, _) = value(&csv, "plant", "height");
+    let (metric_height, unit) = scaled_value("plant", "height");
+    assert_eq!(unit, "m");
+    assert!((metric_height - 0.5 * height).abs() <= 1e-9);
+    let bad = cargo_bin_cmd!("frond")
+        .args(["traits", "--scale-from", "0,0,0:1,1"])
+        .arg(out)
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("X,Y,Z"));
+
+    // Against the truth: the synthetic world is metric, so model units are metres here.
+    let output = cargo_bin_cmd!("frond")
+        .args(["eval", "--traits", "--json", "--gt"])
+        .arg(dataset())
+        .arg("--pred")
+        .arg(out)
+        .output()
+        .unwrap();
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let accuracy: Value = serde_json::from_slice(&output.stdout).unwrap();
+    eprintln!("{}", serde_json::to_string(&accuracy["leaf_area_relative_error"]).unwrap());
+    let median = |key: &str| accuracy[key]["median"].as_f64().unwrap();
+    assert!(accuracy["leaves"].as_array().unwrap().len() >= 8, "{accuracy}");
+    assert!(median("leaf_area_relative_error") <= 0.05, "{accuracy}");
+    assert!(median("leaf_inclination_error_deg") <= 5.0, "{accuracy}");
+    assert!(median("leaf_length_relative_error") <= 0.05, "{accuracy}");
+}

@@ -886,6 +886,37 @@ mod tests {
         assert!(t.deformation > 0.005, "{t:?}");
     }
 
+    /// The measurement on the synthetic generator's leaves (bent, cupped, of every shape)
+    /// against the lengths it built them with.
+    #[test]
+    fn midrib_lengths_of_generated_leaves_match_their_construction() {
+        use crate::synth::Preset;
+        let mut errors = Vec::new();
+        for preset in [Preset::Broadleaf, Preset::Medium] {
+            for seed in 1..=3 {
+                let plant = crate::synth::plant::generate_plant(preset, seed);
+                for leaf in &plant.leaves {
+                    let base = leaf.world_from_leaf.translation.vector;
+                    let t = leaf_traits(
+                        &leaf.mesh,
+                        Some(Point3::from(base)),
+                        &Point3::origin(),
+                        &Vector3::z(),
+                    )
+                    .unwrap();
+                    let truth = leaf.geometry.midrib_length();
+                    errors.push(((t.length - truth) / truth, preset, seed, leaf.id));
+                }
+            }
+        }
+        errors.sort_by(|a, b| a.0.abs().total_cmp(&b.0.abs()));
+        let median = errors[errors.len() / 2].0.abs();
+        let worst = errors[errors.len() - 1];
+        eprintln!("median {median}, worst {worst:?}, n {}", errors.len());
+        assert!(median < 0.01, "median {median}");
+        assert!(worst.0.abs() < 0.03, "worst {worst:?}");
+    }
+
     #[test]
     fn units_follow_the_scale_and_say_so() {
         let mesh = rectangle(
