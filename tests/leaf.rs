@@ -477,14 +477,27 @@ fn reconstruct_writes_traits_and_traits_follow_the_scale() {
 
     let scaled = tempfile::tempdir().unwrap();
     cargo_bin_cmd!("frond")
-        .args(["traits", "--scale", "0.5", "--plant", "pot 7, left", "--out"])
+        .args([
+            "traits",
+            "--scale",
+            "0.5",
+            "--plant",
+            "pot 7, left",
+            "--out",
+        ])
         .arg(scaled.path())
         .arg(out)
         .assert()
         .success();
     let scaled_csv = std::fs::read_to_string(scaled.path().join("traits.csv")).unwrap();
     // The plant id with a comma is quoted; values are scaled by 0.5 (lengths) and 0.25 (areas).
-    assert!(scaled_csv.lines().nth(1).unwrap().starts_with("\"pot 7, left\","));
+    assert!(
+        scaled_csv
+            .lines()
+            .nth(1)
+            .unwrap()
+            .starts_with("\"pot 7, left\",")
+    );
     let scaled_value = |organ: &str, name: &str| -> (f64, String) {
         let line = scaled_csv
             .lines()
@@ -516,11 +529,21 @@ fn reconstruct_writes_traits_and_traits_follow_the_scale() {
         .arg(out)
         .output()
         .unwrap();
-    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
     let accuracy: Value = serde_json::from_slice(&output.stdout).unwrap();
-    eprintln!("{}", serde_json::to_string(&accuracy["leaf_area_relative_error"]).unwrap());
+    eprintln!(
+        "{}",
+        serde_json::to_string(&accuracy["leaf_area_relative_error"]).unwrap()
+    );
     let median = |key: &str| accuracy[key]["median"].as_f64().unwrap();
-    assert!(accuracy["leaves"].as_array().unwrap().len() >= 8, "{accuracy}");
+    assert!(
+        accuracy["leaves"].as_array().unwrap().len() >= 8,
+        "{accuracy}"
+    );
     assert!(median("leaf_area_relative_error") <= 0.05, "{accuracy}");
     assert!(median("leaf_inclination_error_deg") <= 5.0, "{accuracy}");
     assert!(median("leaf_length_relative_error") <= 0.05, "{accuracy}");

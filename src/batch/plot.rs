@@ -9,15 +9,22 @@ use crate::traits::TraitRow;
 /// A strip plot of the `leaf`/`area` rows, grouped by plant. `metric`: the values are m²
 /// (shown as cm²), else model units². Errors when no row is a leaf area.
 pub fn leaf_area_plot(rows: &[TraitRow], metric: bool) -> Result<Vec<u8>, String> {
-    let mut plants: Vec<(String, Vec<f64>)> = Vec::new();
+    let synthesized: std::collections::HashSet<(&str, &str)> = rows
+        .iter()
+        .filter(|r| r.organ_type == "leaf" && r.trait_name == "synthesized" && r.value > 0.5)
+        .map(|r| (r.plant.as_str(), r.organ_id.as_str()))
+        .collect();
+    // Per plant: (area, synthesized) of every leaf.
+    let mut plants: Vec<(String, Vec<(f64, bool)>)> = Vec::new();
     for r in rows
         .iter()
         .filter(|r| r.organ_type == "leaf" && r.trait_name == "area" && r.value.is_finite())
     {
         let value = if metric { r.value * 1e4 } else { r.value };
+        let posed = synthesized.contains(&(r.plant.as_str(), r.organ_id.as_str()));
         match plants.iter_mut().find(|(p, _)| *p == r.plant) {
-            Some((_, values)) => values.push(value),
-            None => plants.push((r.plant.clone(), vec![value])),
+            Some((_, values)) => values.push((value, posed)),
+            None => plants.push((r.plant.clone(), vec![(value, posed)])),
         }
     }
     if plants.is_empty() {
@@ -25,7 +32,7 @@ pub fn leaf_area_plot(rows: &[TraitRow], metric: bool) -> Result<Vec<u8>, String
     }
     let max = plants
         .iter()
-        .flat_map(|(_, v)| v.iter().copied())
+        .flat_map(|(_, v)| v.iter().map(|(a, _)| *a))
         .fold(0.0f64, f64::max);
     let top = nice_ceiling(max);
     let (left, right, upper, lower) = (110, 30, 50, 90);
@@ -80,25 +87,31 @@ pub fn leaf_area_plot(rows: &[TraitRow], metric: bool) -> Result<Vec<u8>, String
     text(&mut mat, unit, Point::new(10, 30), 0.6).map_err(cv)?;
     let green = Scalar::new(60.0, 140.0, 40.0, 0.0);
     let red = Scalar::new(40.0, 40.0, 200.0, 0.0);
+    let light = Scalar::new(170.0, 200.0, 160.0, 0.0);
     for (k, (plant, values)) in plants.iter().enumerate() {
         let x = left + column * k as i32 + column / 2;
-        for (j, v) in values.iter().enumerate() {
+        for (j, (v, posed)) in values.iter().enumerate() {
             // A deterministic spread across the column so that equal areas stay visible.
             let jitter = ((j * 37) % 29) as i32 - 14;
             imgproc::circle(
                 &mut mat,
                 Point::new(x + jitter, y_of(*v)),
                 4,
-                green,
+                if *posed { light } else { green },
                 -1,
                 imgproc::LINE_AA,
                 0,
             )
             .map_err(cv)?;
         }
-        let mut sorted = values.clone();
+        let mut sorted: Vec<f64> = values.iter().map(|(a, _)| *a).collect();
         sorted.sort_by(f64::total_cmp);
-        let median = sorted[sorted.len() / 2];
+        let n = sorted.len();
+        let median = if n % 2 == 1 {
+            sorted[n / 2]
+        } else {
+            0.5 * (sorted[n / 2 - 1] + sorted[n / 2])
+        };
         imgproc::line(
             &mut mat,
             Point::new(x - 25, y_of(median)),
@@ -138,8 +151,8 @@ pub fn leaf_area_plot(rows: &[TraitRow], metric: bool) -> Result<Vec<u8>, String
     .map_err(cv)?;
     text(
         &mut mat,
-        "dots: leaves; bar: median",
-        Point::new(left, height - 15),
+        "dots: leaves (pale: synthesized); bar: median",
+        Point::new(10, height - 15),
         0.45,
     )
     .map_err(cv)?;

@@ -263,7 +263,7 @@ enum Command {
         /// stop: what the Snakemake workflow reads.
         #[arg(long)]
         list: bool,
-        /// Plants at a time (default: the cores, fewer when memory is short: about 3 GiB
+        /// Plants at a time (default: the cores, fewer when memory is short: 1.5 GiB
         /// per plant).
         #[arg(long)]
         jobs: Option<usize>,
@@ -626,7 +626,7 @@ fn batch(
 ) -> Result<()> {
     let entries = frond::batch::read_manifest(manifest)?;
     let options = frond::batch::BatchOptions {
-        jobs: jobs.unwrap_or_else(|| frond::batch::default_jobs(3 << 30)),
+        jobs: jobs.unwrap_or_else(|| frond::batch::default_jobs(3 << 29)),
         input,
         reconstruct: ReconstructOptions::default(),
     };

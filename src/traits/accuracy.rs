@@ -301,6 +301,7 @@ mod tests {
                 mesh,
                 base_world: Some(Point3::new(0.0, 0.0, 0.3)),
                 branch: None,
+                synthesized: false,
             }],
             branches: vec![SkeletonRecord {
                 id: 3,

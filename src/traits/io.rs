@@ -83,6 +83,7 @@ pub fn read_reconstruction(out: &Path, plant: &str) -> Result<PlantOrgans, Trait
             mesh: node.mesh,
             base_world,
             branch,
+            synthesized: fitted.is_none(),
         });
     }
     Ok(PlantOrgans {
@@ -126,6 +127,7 @@ pub fn read_ground_truth(dataset: &Path, plant: &str) -> Result<PlantOrgans, Tra
             mesh,
             base_world: Some(Point3::from(record.base)),
             branch: record.branch.map(|b| (b, 1.0)),
+            synthesized: false,
         });
     }
     let branches_path = gt.join("branches.json");

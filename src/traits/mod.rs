@@ -42,6 +42,9 @@ pub struct LeafOrgan {
     pub base_world: Option<Point3<f64>>,
     /// The branch the leaf is attached to, and where along it (0 = base, 1 = tip).
     pub branch: Option<(u32, f64)>,
+    /// A leaf the reconstruction synthesized (the average leaf posed on a segment too small
+    /// to fit, or at a branch tip) rather than fitted to its own points.
+    pub synthesized: bool,
 }
 
 /// What traits are measured from.
@@ -169,6 +172,7 @@ enum Kind {
     Angle,
     Count,
     Id,
+    Flag,
 }
 
 struct Units {
@@ -193,6 +197,7 @@ impl Units {
             Kind::Angle => (value, "deg".into()),
             Kind::Count => (value, "count".into()),
             Kind::Id => (value, "id".into()),
+            Kind::Flag => (value, "flag".into()),
         }
     }
 }
@@ -556,6 +561,13 @@ pub fn plant_traits(organs: &PlantOrgans, scale: Option<&Scale>) -> TraitTable {
         if let Some((branch, _)) = leaf.branch {
             push(&id, "leaf", "branch", Kind::Id, branch as f64);
         }
+        push(
+            &id,
+            "leaf",
+            "synthesized",
+            Kind::Flag,
+            if leaf.synthesized { 1.0 } else { 0.0 },
+        );
         leaf_traits_by_id.insert(leaf.id, t);
     }
 
@@ -690,6 +702,18 @@ pub fn plant_traits(organs: &PlantOrgans, scale: Option<&Scale>) -> TraitTable {
         "leaf_count",
         Kind::Count,
         leaf_traits_by_id.len() as f64,
+    );
+    let fitted = organs
+        .leaves
+        .iter()
+        .filter(|l| !l.synthesized && leaf_traits_by_id.contains_key(&l.id))
+        .count();
+    push(
+        "plant",
+        "plant",
+        "fitted_leaf_count",
+        Kind::Count,
+        fitted as f64,
     );
     push(
         "plant",
@@ -934,6 +958,7 @@ mod tests {
                 mesh,
                 base_world: None,
                 branch: Some((0, 0.8)),
+                synthesized: false,
             }],
             branches: vec![record(0, None, 0.0, &[[0.0, 0.0, 0.0], [0.0, 0.0, 0.3]])],
         };
