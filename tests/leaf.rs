@@ -519,7 +519,7 @@ fn reconstruct_writes_traits_and_traits_follow_the_scale() {
         .output()
         .unwrap();
     assert!(!bad.status.success());
-    assert!(String::from_utf8_lossy(&bad.stderr).contains("X,Y,Z"));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("expected X1,Y1,Z1:X2,Y2,Z2:METRES"));
 
     // Against the truth: the synthetic world is metric, so model units are metres here.
     let output = cargo_bin_cmd!("frond")
