@@ -12,4 +12,4 @@ frond=target/release/frond
 "$frond" info "$out/plant"
 "$frond" reconstruct "$out/plant" --out "$out/reconstruction"
 "$frond" eval --gt "$out/plant" --pred "$out/reconstruction"
-echo "outputs: $out/reconstruction (plant.glb, plant.obj, segmentation.ply, segments.json, skeleton.json, report.json)"
+echo "outputs: $out/reconstruction (plant.glb, plant.obj, segmentation.ply, segments.json, skeleton.json, report.json, traits.csv, traits.json)"
