@@ -1086,6 +1086,18 @@ fn print_sfm(report: &frond::sfm::SfmReport, out: &Path) {
     for rejected in &report.rejected {
         eprintln!("left out {}: {}", rejected.photo, rejected.reason);
     }
+    for blurred in &report.blurred {
+        eprintln!(
+            "blurred? {}: {:.0} % of the capture's median sharpness{}",
+            blurred.photo,
+            100.0 * blurred.relative_sharpness,
+            if report.unregistered.contains(&blurred.photo) {
+                " (not registered)"
+            } else {
+                ""
+            }
+        );
+    }
     if !report.unregistered.is_empty() {
         eprintln!("not registered: {}", report.unregistered.join(", "));
     }

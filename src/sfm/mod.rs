@@ -149,6 +149,9 @@ pub struct SfmReport {
     pub matcher: String,
     /// Photos left out before COLMAP (unreadable, truncated, duplicates).
     pub rejected: Vec<RejectedPhoto>,
+    /// Usable photos much less sharp than the capture's median (kept; a likely reason when
+    /// they are not registered).
+    pub blurred: Vec<photos::BlurredPhoto>,
     /// Cameras (one per photo size with a shared camera).
     pub cameras: usize,
     /// Pairs whose descriptors were matched (Frond's matcher; 0 for COLMAP's).
@@ -311,8 +314,25 @@ pub fn run_sfm(
         photos: files.len(),
         matcher: format!("{:?}", options.matcher),
         rejected: check.rejected.clone(),
+        blurred: check.blurred.clone(),
         ..SfmReport::default()
     };
+    if !check.blurred.is_empty() {
+        tracing::warn!(
+            "{} photos are much less sharp than the rest (blurred?): {}",
+            check.blurred.len(),
+            check
+                .blurred
+                .iter()
+                .map(|b| format!(
+                    "{} ({:.0} % of the median sharpness)",
+                    b.photo,
+                    100.0 * b.relative_sharpness
+                ))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
     report
         .timings
         .insert("check".into(), started.elapsed().as_secs_f64());
@@ -575,10 +595,21 @@ fn run_steps(
         });
     }
     if !report.unregistered.is_empty() {
+        let blurred: Vec<&str> = report
+            .blurred
+            .iter()
+            .filter(|b| report.unregistered.contains(&b.photo))
+            .map(|b| b.photo.as_str())
+            .collect();
         tracing::warn!(
-            "{} of {usable} photos not registered in the main model (sparse/0): {}{}",
+            "{} of {usable} photos not registered in the main model (sparse/0): {}{}{}",
             report.unregistered.len(),
             report.unregistered.join(", "),
+            if blurred.is_empty() {
+                String::new()
+            } else {
+                format!("; blurred among them: {}", blurred.join(", "))
+            },
             if models.len() > 1 {
                 format!("; {} smaller models kept as sparse/1…", models.len() - 1)
             } else {
