@@ -18,7 +18,7 @@ fn render_views(c: &mut Criterion) {
     group.throughput(Throughput::Elements(1));
     for preset in Preset::ALL {
         let plant = generate_plant(preset, 1);
-        let scene = build_scene(&plant, 2.5, 1);
+        let scene = build_scene(&plant, 2.5, 1, None);
         let (camera, poses) = ring_cameras(&plant, 36, 800, 600);
         let view = ViewCamera::from_colmap(&camera, &poses[3], 0.02, 10.0).expect("pinhole");
         for (label, keep) in [("environment_only", false), ("full", true)] {

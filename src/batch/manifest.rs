@@ -1,7 +1,8 @@
 //! The batch manifest: a CSV file with a header row. Columns: `plant` (an id, used as the
 //! output folder's name), `input` (a folder of photos or a COLMAP project; relative paths are
 //! relative to the manifest), and optionally `scale` (metres per model unit), `scale_from`
-//! (`X1,Y1,Z1:X2,Y2,Z2:METRES`) and `no_densify` (`true` to segment a COLMAP folder's points as
+//! (`X1,Y1,Z1:X2,Y2,Z2:METRES`), `checkerboard` (`COLSxROWS:SQUARE_METRES` of a printed board
+//! in the photos) and `no_densify` (`true` to segment a COLMAP folder's points as
 //! they are). Empty cells take the default.
 
 use std::collections::BTreeSet;
@@ -16,10 +17,19 @@ pub struct ManifestEntry {
     pub plant: String,
     pub input: PathBuf,
     pub scale: Option<Scale>,
+    /// A checkerboard in the photos to take the scale from: inner corners and square size.
+    pub checkerboard: Option<((u32, u32), f64)>,
     pub no_densify: bool,
 }
 
-const COLUMNS: [&str; 5] = ["plant", "input", "scale", "scale_from", "no_densify"];
+const COLUMNS: [&str; 6] = [
+    "plant",
+    "input",
+    "scale",
+    "scale_from",
+    "checkerboard",
+    "no_densify",
+];
 
 /// Splits CSV text into records of fields (RFC 4180: quoted fields may hold commas, doubled
 /// quotes and line breaks). Blank lines are skipped. Errors name the 1-based line.
@@ -188,6 +198,23 @@ pub fn read_manifest(path: &Path) -> Result<Vec<ManifestEntry>, BatchError> {
             ),
             (None, None) => None,
         };
+        let checkerboard = match cell("checkerboard") {
+            None => None,
+            Some(text) => {
+                if scale.is_some() {
+                    return Err(manifest_error(
+                        path,
+                        format!(
+                            "line {line}: give one of `scale`, `scale_from` and `checkerboard`"
+                        ),
+                    ));
+                }
+                Some(
+                    crate::traits::marker::parse_checkerboard(text)
+                        .map_err(|e| manifest_error(path, format!("line {line}: {e}")))?,
+                )
+            }
+        };
         let no_densify = match cell("no_densify").map(|v| v.to_lowercase()) {
             None => false,
             Some(v) if ["true", "yes", "1"].contains(&v.as_str()) => true,
@@ -203,6 +230,7 @@ pub fn read_manifest(path: &Path) -> Result<Vec<ManifestEntry>, BatchError> {
             plant,
             input,
             scale,
+            checkerboard,
             no_densify,
         });
     }
@@ -265,6 +293,14 @@ mod tests {
             ("plant,input,scale\np1,a,big\n", "line 2: scale `big`"),
             ("plant,input,scale\np1,a,-2\n", "line 2: scale"),
             ("plant,input,no_densify\np1,a,maybe\n", "no_densify `maybe`"),
+            (
+                "plant,input,checkerboard\np1,a,8by6\n",
+                "line 2: scale: `8by6`",
+            ),
+            (
+                "plant,input,scale,checkerboard\np1,a,1,8x6:0.03\n",
+                "one of `scale`",
+            ),
             ("plant,input\np1,\n", "has no input"),
         ];
         for (text, expected) in cases {

@@ -201,8 +201,14 @@ pub fn run_plant(
         source: Box::new(source),
     })?;
     progress.stage("traits", 0);
+    let scale = match entry.checkerboard {
+        Some((inner, square)) => {
+            Some(crate::traits::marker::checkerboard_scale(&scene, inner, square)?.0)
+        }
+        None => entry.scale.clone(),
+    };
     let organs = crate::traits::io::read_reconstruction(dir, &entry.plant)?;
-    let table = crate::traits::plant_traits(&organs, entry.scale.as_ref());
+    let table = crate::traits::plant_traits(&organs, scale.as_ref());
     write_traits(dir, &table)?;
     Ok(organs.leaves.len())
 }

@@ -72,6 +72,10 @@ enum Command {
         /// Leave points3D empty (to run the images through real COLMAP).
         #[arg(long)]
         no_points: bool,
+        /// Lay a printed checkerboard (9×7 squares of this many metres) beside the pot, a
+        /// scale reference for `frond traits --scale-checkerboard`.
+        #[arg(long)]
+        checkerboard: Option<f64>,
         #[arg(long)]
         out: PathBuf,
     },
@@ -308,12 +312,43 @@ struct ScaleArgs {
     scale: Option<f64>,
     /// A known distance between two model points: X1,Y1,Z1:X2,Y2,Z2:METRES (e.g. two
     /// corners of a marker or the ends of a ruler picked in the model).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "scale_checkerboard")]
     scale_from: Option<String>,
+    /// A printed checkerboard in the photos: COLSxROWS:SQUARE_METRES, counting inner
+    /// corners (e.g. 8x6:0.02 for a board of 9×7 squares of 2 cm), found by OpenCV in the
+    /// photos of the reconstruction's scene.
+    #[arg(long, conflicts_with = "scale")]
+    scale_checkerboard: Option<String>,
 }
 
 impl ScaleArgs {
-    fn scale(&self) -> Result<Option<frond::traits::Scale>> {
+    /// The scale asked for; a checkerboard is looked for in the photos of the scene the
+    /// reconstruction in `reconstruction` was made from (its report.json says which).
+    fn scale(&self, reconstruction: &Path) -> Result<Option<frond::traits::Scale>> {
+        if let Some(text) = &self.scale_checkerboard {
+            let (inner, square) = frond::traits::marker::parse_checkerboard(text)?;
+            let report_path = reconstruction.join("report.json");
+            let report = frond::pipeline::ReconstructionReport::read(&report_path)
+                .with_context(|| format!("reading {}", report_path.display()))?;
+            let scene_path = report
+                .preparation
+                .as_ref()
+                .map(|p| p.scene.clone())
+                .unwrap_or(report.input.clone());
+            let scene = Scene::open(&scene_path)
+                .with_context(|| format!("opening the scene {}", scene_path.display()))?;
+            let (scale, found) = frond::traits::marker::checkerboard_scale(&scene, inner, square)
+                .with_context(|| {
+                format!("--scale-checkerboard {text} in {}", scene_path.display())
+            })?;
+            eprintln!(
+                "checkerboard in {} photos: {:.6} m per model unit (spread {:.2} %)",
+                found.views.len(),
+                found.metres_per_unit,
+                100.0 * found.relative_spread
+            );
+            return Ok(Some(scale));
+        }
         Ok(match (&self.scale, &self.scale_from) {
             (Some(f), _) => Some(frond::traits::Scale::factor(*f)?),
             (None, Some(text)) => Some(
@@ -786,9 +821,11 @@ fn synth(
     noise: f64,
     outliers: f64,
     no_points: bool,
+    checkerboard: Option<f64>,
     out: &Path,
 ) -> Result<()> {
     let options = SynthOptions {
+        checkerboard,
         preset,
         seed,
         views,
@@ -1386,9 +1423,19 @@ fn main() -> Result<()> {
             noise,
             outliers,
             no_points,
+            checkerboard,
             out,
         } => synth(
-            *preset, *seed, *views, *size, *points, *noise, *outliers, *no_points, out,
+            *preset,
+            *seed,
+            *views,
+            *size,
+            *points,
+            *noise,
+            *outliers,
+            *no_points,
+            *checkerboard,
+            out,
         ),
         Command::Sfm {
             photos,
@@ -1408,14 +1455,13 @@ fn main() -> Result<()> {
             no_densify,
             scale,
         } => {
-            let scale = scale.scale()?;
             let input = frond::pipeline::InputOptions {
                 sfm: sfm_args.options()?,
                 densify: dense.options()?,
                 auto_densify: !*no_densify,
             };
             reconstruct(scene, &input, params, *fit, *template, out)?;
-            let table = traits(out, None, scale, None)?;
+            let table = traits(out, None, scale.scale(out)?, None)?;
             eprintln!(
                 "{} trait rows -> {}",
                 table.rows.len(),
@@ -1518,6 +1564,9 @@ fn main() -> Result<()> {
                         "input": e.input,
                         "photos": frond::pipeline::is_photo_folder(&e.input),
                         "scale": e.scale.as_ref().map(|s| s.metres_per_unit),
+                        "checkerboard": e.checkerboard.as_ref().map(|(inner, square)| {
+                            format!("{}x{}:{square}", inner.0, inner.1)
+                        }),
                         "no_densify": e.no_densify,
                     })
                 })
@@ -1563,7 +1612,7 @@ fn main() -> Result<()> {
             let table = traits(
                 reconstruction,
                 plant.as_deref(),
-                scale.scale()?,
+                scale.scale(reconstruction)?,
                 out.as_deref(),
             )?;
             let leaves = table.value("plant", "leaf_count").unwrap_or(0.0);

@@ -53,6 +53,10 @@ pub struct SynthOptions {
     pub outlier_fraction: f64,
     /// Standard deviation of keypoint noise, pixels.
     pub keypoint_noise_px: f64,
+    /// A printed checkerboard of squares this many metres wide beside the pot (a scale
+    /// reference; `scene::CHECKERBOARD_SQUARES` squares), or none.
+    #[serde(default)]
+    pub checkerboard: Option<f64>,
 }
 
 impl Default for SynthOptions {
@@ -68,6 +72,7 @@ impl Default for SynthOptions {
             position_noise: 0.001,
             outlier_fraction: 0.005,
             keypoint_noise_px: 0.3,
+            checkerboard: None,
         }
     }
 }
@@ -261,7 +266,7 @@ pub fn write_dataset(
     let (camera, poses) = ring_cameras(&plant, options.views, options.width, options.height);
     let camera_distance = (poses[0].inverse() * Point3::origin()).coords.norm();
     let backdrop_radius = (2.2 * camera_distance).max(1.5);
-    let scene = build_scene(&plant, backdrop_radius, options.seed);
+    let scene = build_scene(&plant, backdrop_radius, options.seed, options.checkerboard);
     lap("generate", &mut timings);
 
     // Render every view.

@@ -167,8 +167,64 @@ fn floor_mesh(half_size: f64, metres_per_texture: f64) -> TriMesh {
     mesh
 }
 
-/// Builds the scene of a plant: its leaves and branches, the pot, floor and backdrop.
-pub fn build_scene(plant: &SynthPlant, backdrop_radius: f64, seed: u64) -> SynthScene {
+/// Squares of the printed checkerboard a capture may show as a scale reference (so 8 × 6
+/// inner corners), with a one-square white margin around them.
+pub const CHECKERBOARD_SQUARES: (u32, u32) = (9, 7);
+
+/// Where the checkerboard lies: flat on the floor beside the pot, its squares along x and y,
+/// centred at the returned (x, y), clear of the pot by one square.
+pub fn checkerboard_centre(plant: &SynthPlant, square: f64) -> [f64; 2] {
+    let half_x = 0.5 * (CHECKERBOARD_SQUARES.0 + 2) as f64 * square;
+    [
+        plant.pot.radius_bottom.max(plant.pot.radius_top) + square + half_x,
+        0.0,
+    ]
+}
+
+/// The checkerboard as a textured quad just above the floor and its texture.
+fn checkerboard(plant: &SynthPlant, square: f64) -> (TriMesh, RgbaImage) {
+    let (nx, ny) = (CHECKERBOARD_SQUARES.0 + 2, CHECKERBOARD_SQUARES.1 + 2);
+    let [cx, cy] = checkerboard_centre(plant, square);
+    let (hx, hy) = (0.5 * nx as f64 * square, 0.5 * ny as f64 * square);
+    let n = 8u32;
+    let mut mesh = TriMesh::default();
+    for j in 0..=n {
+        for i in 0..=n {
+            let (u, v) = (i as f32 / n as f32, j as f32 / n as f32);
+            let x = cx - hx + 2.0 * hx * u as f64;
+            let y = cy + hy - 2.0 * hy * v as f64;
+            mesh.positions.push(Point3::new(x as f32, y as f32, 0.0005));
+            mesh.normals.push(Vector3::z());
+            mesh.uvs.push([u, v]);
+        }
+    }
+    for j in 0..n {
+        for i in 0..n {
+            let a = j * (n + 1) + i;
+            let (b, c, d) = (a + 1, a + n + 1, a + n + 2);
+            mesh.triangles.push([a, c, b]);
+            mesh.triangles.push([b, c, d]);
+        }
+    }
+    let px = 48u32;
+    let texture = RgbaImage::from_fn(nx * px, ny * px, |x, y| {
+        let (i, j) = (x / px, y / px);
+        let inside = i >= 1 && j >= 1 && i <= CHECKERBOARD_SQUARES.0 && j <= CHECKERBOARD_SQUARES.1;
+        let dark = inside && (i + j) % 2 == 0;
+        let level = if dark { 20 } else { 235 };
+        image::Rgba([level, level, level, 255])
+    });
+    (mesh, texture)
+}
+
+/// Builds the scene of a plant: its leaves and branches, the pot, floor and backdrop, and a
+/// checkerboard of `checkerboard` metre squares beside the pot when asked.
+pub fn build_scene(
+    plant: &SynthPlant,
+    backdrop_radius: f64,
+    seed: u64,
+    checkerboard_square: Option<f64>,
+) -> SynthScene {
     let mut rng = Rng::seed_from(seed ^ 0x7e57_u64);
     let mut textures = Vec::new();
     let mut objects = Vec::new();
@@ -245,6 +301,18 @@ pub fn build_scene(plant: &SynthPlant, backdrop_radius: f64, seed: u64) -> Synth
         mesh: floor_mesh(backdrop_radius, 2.0 * backdrop_radius),
         texture: textures.len() - 1,
     });
+    if let Some(square) = checkerboard_square {
+        let (mesh, board) = checkerboard(plant, square);
+        textures.push(board);
+        objects.push(SceneObject {
+            object_id: 200_006,
+            part: Part::Floor,
+            leaf_id: -1,
+            branch_id: -1,
+            mesh,
+            texture: textures.len() - 1,
+        });
+    }
     textures.push(texture::backdrop_texture(4096, 1024, &mut rng));
     let wall_height = 1.6 * backdrop_radius;
     let backdrop = revolve(
@@ -283,7 +351,7 @@ mod tests {
     #[test]
     fn scene_ids_are_unique_and_parts_consistent() {
         let plant = generate_plant(Preset::Broadleaf, 1);
-        let scene = build_scene(&plant, 2.0, 1);
+        let scene = build_scene(&plant, 2.0, 1, None);
         let mut ids: Vec<u32> = scene.objects.iter().map(|o| o.object_id).collect();
         ids.sort_unstable();
         ids.dedup();

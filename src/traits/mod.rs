@@ -12,6 +12,7 @@
 pub mod accuracy;
 pub mod hull;
 pub mod io;
+pub mod marker;
 
 use std::collections::BTreeMap;
 
