@@ -43,9 +43,10 @@ fn a_checkerboard_in_the_photos_gives_the_metric_scale() {
 }
 
 #[test]
-fn no_checkerboard_no_scale() {
+fn no_checkerboard_no_scale_and_the_truth_measured_in_metres() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = Scene::open(&dataset(dir.path(), None)).unwrap();
+    let plant = dataset(dir.path(), None);
+    let scene = Scene::open(&plant).unwrap();
     let err = checkerboard_scale(&scene, (8, 6), 0.02)
         .unwrap_err()
         .to_string();

@@ -290,13 +290,17 @@ enum Command {
     /// Measure a reconstruction's organs: `traits.csv` (long form: plant, organ_id,
     /// organ_type, trait, value, unit) and `traits.json`, written into the folder (or --out).
     Traits {
-        /// A `frond reconstruct` output folder.
+        /// A `frond reconstruct` output folder (or, with --truth, a synthetic dataset).
         reconstruction: PathBuf,
         /// Plant id in the table (default: the folder's name).
         #[arg(long)]
         plant: Option<String>,
         #[command(flatten)]
         scale: ScaleArgs,
+        /// Measure a synthetic dataset's ground truth (gt/leaves, gt/branches.json; metres)
+        /// by the same code, e.g. to compare tables.
+        #[arg(long, conflicts_with_all = ["scale", "scale_from", "scale_checkerboard"])]
+        truth: bool,
         /// Where to write the two files (default: the reconstruction folder).
         #[arg(long)]
         out: Option<PathBuf>,
@@ -1606,8 +1610,38 @@ fn main() -> Result<()> {
         Command::Traits {
             reconstruction,
             plant,
+            truth: true,
+            out,
+            ..
+        } => {
+            let name = plant.clone().unwrap_or_else(|| plant_name(reconstruction));
+            let organs =
+                frond::traits::io::read_ground_truth(reconstruction, &name).with_context(|| {
+                    format!("reading the ground truth of {}", reconstruction.display())
+                })?;
+            // The synthetic world is in metres.
+            let scale = frond::traits::Scale {
+                metres_per_unit: 1.0,
+                source: "synthetic ground truth (metres)".into(),
+            };
+            let table = frond::traits::plant_traits(&organs, Some(&scale));
+            let dir = out.as_deref().unwrap_or(reconstruction);
+            frond::traits::io::write_traits(dir, &table)
+                .with_context(|| format!("writing traits into {}", dir.display()))?;
+            eprintln!(
+                "{} rows of the truth ({} leaves) -> {}",
+                table.rows.len(),
+                organs.leaves.len(),
+                dir.join("traits.csv").display()
+            );
+            Ok(())
+        }
+        Command::Traits {
+            reconstruction,
+            plant,
             scale,
             out,
+            ..
         } => {
             let table = traits(
                 reconstruction,
