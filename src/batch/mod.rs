@@ -325,15 +325,23 @@ fn one_plant(
             .map(|n| n as usize);
         return record(PlantStatus::Skipped, None, leaves);
     }
+    // A plant folder is only ever made complete (renamed into place with its traits); one
+    // without readable traits is someone else's work and is left alone.
+    if final_dir.exists() {
+        return record(
+            PlantStatus::Failed,
+            Some(format!(
+                "{} exists but holds no readable traits.json from frond; move it away (or delete it) to run this plant",
+                final_dir.display()
+            )),
+            None,
+        );
+    }
     let partial = out.join(format!(".{}.partial", entry.plant));
     let attempt = || -> Result<usize, PlantError> {
+        // An interrupted run of this plant (the batch's own hidden folder) is redone.
         if partial.exists() {
             std::fs::remove_dir_all(&partial).map_err(|e| io_error(&partial, e))?;
-        }
-        // A plant folder without traits (written by something else, or by an older run) is
-        // replaced, never merged into.
-        if final_dir.exists() {
-            std::fs::remove_dir_all(&final_dir).map_err(|e| io_error(&final_dir, e))?;
         }
         let plant_progress = PlantProgress {
             plant: &entry.plant,
@@ -349,5 +357,39 @@ fn one_plant(
             tracing::warn!("plant {} failed: {e}", entry.plant);
             record(PlantStatus::Failed, Some(e.to_string()), None)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_foreign_folder_in_a_plants_place_is_left_alone_and_named() {
+        let out = tempfile::tempdir().unwrap();
+        std::fs::create_dir(out.path().join("p1")).unwrap();
+        std::fs::write(out.path().join("p1/notes.txt"), "my measurements").unwrap();
+        let entry = ManifestEntry {
+            plant: "p1".into(),
+            input: out.path().join("nowhere"),
+            scale: None,
+            checkerboard: None,
+            no_densify: false,
+        };
+        let options = BatchOptions {
+            jobs: 1,
+            input: InputOptions::default(),
+            reconstruct: ReconstructOptions::default(),
+        };
+        let record = one_plant(&entry, out.path(), &options, &NoBatchProgress);
+        assert_eq!(record.status, PlantStatus::Failed);
+        assert!(
+            record.error.as_deref().unwrap().contains("move it away"),
+            "{record:?}"
+        );
+        assert_eq!(
+            std::fs::read_to_string(out.path().join("p1/notes.txt")).unwrap(),
+            "my measurements"
+        );
     }
 }
