@@ -205,13 +205,25 @@ impl TriMesh {
                 + self.positions[ib].coords * wb
                 + self.positions[ic].coords * wc,
         );
-        let normal = (self.normals[ia] * wa + self.normals[ib] * wb + self.normals[ic] * wc)
-            .try_normalize(1e-20)
-            .unwrap_or_else(Vector3::z);
-        let uv = [
-            self.uvs[ia][0] * wa + self.uvs[ib][0] * wb + self.uvs[ic][0] * wc,
-            self.uvs[ia][1] * wa + self.uvs[ib][1] * wb + self.uvs[ic][1] * wc,
-        ];
+        // Meshes read without normals or texture coordinates (e.g. a PLY of positions only)
+        // sample a +z normal and uv (0, 0).
+        let normal = match (
+            self.normals.get(ia),
+            self.normals.get(ib),
+            self.normals.get(ic),
+        ) {
+            (Some(na), Some(nb), Some(nc)) => (na * wa + nb * wb + nc * wc)
+                .try_normalize(1e-20)
+                .unwrap_or_else(Vector3::z),
+            _ => Vector3::z(),
+        };
+        let uv = match (self.uvs.get(ia), self.uvs.get(ib), self.uvs.get(ic)) {
+            (Some(ua), Some(ub), Some(uc)) => [
+                ua[0] * wa + ub[0] * wb + uc[0] * wc,
+                ua[1] * wa + ub[1] * wb + uc[1] * wc,
+            ],
+            _ => [0.0, 0.0],
+        };
         SurfaceSample {
             position,
             normal,

@@ -374,17 +374,31 @@ fn plant_name(folder: &Path) -> String {
         .unwrap_or_else(|| "plant".to_owned())
 }
 
+/// Measures a reconstruction folder (or, with `truth`, a synthetic dataset's ground truth, in
+/// metres) and writes traits.csv and traits.json into `out` (default: the folder).
 fn traits(
-    reconstruction: &Path,
+    folder: &Path,
     plant: Option<&str>,
     scale: Option<frond::traits::Scale>,
+    truth: bool,
     out: Option<&Path>,
 ) -> Result<frond::traits::TraitTable> {
-    let name = plant.map_or_else(|| plant_name(reconstruction), str::to_owned);
-    let organs = frond::traits::io::read_reconstruction(reconstruction, &name)
-        .with_context(|| format!("reading {}", reconstruction.display()))?;
+    let name = plant.map_or_else(|| plant_name(folder), str::to_owned);
+    let (organs, scale) = if truth {
+        let organs = frond::traits::io::read_ground_truth(folder, &name)
+            .with_context(|| format!("reading the ground truth of {}", folder.display()))?;
+        let metres = frond::traits::Scale {
+            metres_per_unit: 1.0,
+            source: "synthetic ground truth (metres)".into(),
+        };
+        (organs, Some(metres))
+    } else {
+        let organs = frond::traits::io::read_reconstruction(folder, &name)
+            .with_context(|| format!("reading {}", folder.display()))?;
+        (organs, scale)
+    };
     let table = frond::traits::plant_traits(&organs, scale.as_ref());
-    let dir = out.unwrap_or(reconstruction);
+    let dir = out.unwrap_or(folder);
     frond::traits::io::write_traits(dir, &table)
         .with_context(|| format!("writing traits into {}", dir.display()))?;
     Ok(table)
@@ -1465,7 +1479,7 @@ fn main() -> Result<()> {
                 auto_densify: !*no_densify,
             };
             reconstruct(scene, &input, params, *fit, *template, out)?;
-            let table = traits(out, None, scale.scale(out)?, None)?;
+            let table = traits(out, None, scale.scale(out)?, false, None)?;
             eprintln!(
                 "{} trait rows -> {}",
                 table.rows.len(),
@@ -1610,43 +1624,20 @@ fn main() -> Result<()> {
         Command::Traits {
             reconstruction,
             plant,
-            truth: true,
-            out,
-            ..
-        } => {
-            let name = plant.clone().unwrap_or_else(|| plant_name(reconstruction));
-            let organs =
-                frond::traits::io::read_ground_truth(reconstruction, &name).with_context(|| {
-                    format!("reading the ground truth of {}", reconstruction.display())
-                })?;
-            // The synthetic world is in metres.
-            let scale = frond::traits::Scale {
-                metres_per_unit: 1.0,
-                source: "synthetic ground truth (metres)".into(),
-            };
-            let table = frond::traits::plant_traits(&organs, Some(&scale));
-            let dir = out.as_deref().unwrap_or(reconstruction);
-            frond::traits::io::write_traits(dir, &table)
-                .with_context(|| format!("writing traits into {}", dir.display()))?;
-            eprintln!(
-                "{} rows of the truth ({} leaves) -> {}",
-                table.rows.len(),
-                organs.leaves.len(),
-                dir.join("traits.csv").display()
-            );
-            Ok(())
-        }
-        Command::Traits {
-            reconstruction,
-            plant,
             scale,
+            truth,
             out,
-            ..
         } => {
+            let scale = if *truth {
+                None
+            } else {
+                scale.scale(reconstruction)?
+            };
             let table = traits(
                 reconstruction,
                 plant.as_deref(),
-                scale.scale(reconstruction)?,
+                scale,
+                *truth,
                 out.as_deref(),
             )?;
             let leaves = table.value("plant", "leaf_count").unwrap_or(0.0);

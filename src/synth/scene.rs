@@ -140,20 +140,24 @@ fn pot_meshes(pot: &Pot) -> (TriMesh, TriMesh) {
     (pot_mesh, soil)
 }
 
-/// A square floor of side `2 · half_size` at z = 0, subdivided so that no triangle is huge
-/// (keeps interpolated depth accurate), with the texture repeating every `metres_per_texture`.
-fn floor_mesh(half_size: f64, metres_per_texture: f64) -> TriMesh {
-    let h = half_size as f32;
-    let repeat = metres_per_texture as f32;
-    let n = 16u32;
+/// A flat rectangle `[x0, x1] × [y0, y1]` at height `z`, facing +z, subdivided into `n × n`
+/// quads so that no triangle is huge (keeps interpolated depth accurate), with texture
+/// coordinates `uv_of(x, y)`.
+fn flat_grid(
+    (x0, x1): (f32, f32),
+    (y0, y1): (f32, f32),
+    z: f32,
+    n: u32,
+    uv_of: impl Fn(f32, f32) -> [f32; 2],
+) -> TriMesh {
     let mut mesh = TriMesh::default();
     for j in 0..=n {
         for i in 0..=n {
-            let x = -h + 2.0 * h * i as f32 / n as f32;
-            let y = -h + 2.0 * h * j as f32 / n as f32;
-            mesh.positions.push(Point3::new(x, y, 0.0));
+            let x = x0 + (x1 - x0) * i as f32 / n as f32;
+            let y = y0 + (y1 - y0) * j as f32 / n as f32;
+            mesh.positions.push(Point3::new(x, y, z));
             mesh.normals.push(Vector3::z());
-            mesh.uvs.push([x / repeat, -y / repeat]);
+            mesh.uvs.push(uv_of(x, y));
         }
     }
     for j in 0..n {
@@ -165,6 +169,14 @@ fn floor_mesh(half_size: f64, metres_per_texture: f64) -> TriMesh {
         }
     }
     mesh
+}
+
+/// A square floor of side `2 · half_size` at z = 0, with the texture repeating every
+/// `metres_per_texture`.
+fn floor_mesh(half_size: f64, metres_per_texture: f64) -> TriMesh {
+    let h = half_size as f32;
+    let repeat = metres_per_texture as f32;
+    flat_grid((-h, h), (-h, h), 0.0, 16, |x, y| [x / repeat, -y / repeat])
 }
 
 /// Squares of the printed checkerboard a capture may show as a scale reference (so 8 × 6
@@ -186,26 +198,12 @@ fn checkerboard(plant: &SynthPlant, square: f64) -> (TriMesh, RgbaImage) {
     let (nx, ny) = (CHECKERBOARD_SQUARES.0 + 2, CHECKERBOARD_SQUARES.1 + 2);
     let [cx, cy] = checkerboard_centre(plant, square);
     let (hx, hy) = (0.5 * nx as f64 * square, 0.5 * ny as f64 * square);
-    let n = 8u32;
-    let mut mesh = TriMesh::default();
-    for j in 0..=n {
-        for i in 0..=n {
-            let (u, v) = (i as f32 / n as f32, j as f32 / n as f32);
-            let x = cx - hx + 2.0 * hx * u as f64;
-            let y = cy + hy - 2.0 * hy * v as f64;
-            mesh.positions.push(Point3::new(x as f32, y as f32, 0.0005));
-            mesh.normals.push(Vector3::z());
-            mesh.uvs.push([u, v]);
-        }
-    }
-    for j in 0..n {
-        for i in 0..n {
-            let a = j * (n + 1) + i;
-            let (b, c, d) = (a + 1, a + n + 1, a + n + 2);
-            mesh.triangles.push([a, c, b]);
-            mesh.triangles.push([b, c, d]);
-        }
-    }
+    let (x0, y0) = ((cx - hx) as f32, (cy - hy) as f32);
+    let (w, h) = ((2.0 * hx) as f32, (2.0 * hy) as f32);
+    // Just above the floor; the texture's top row at +y.
+    let mesh = flat_grid((x0, x0 + w), (y0, y0 + h), 0.0005, 8, |x, y| {
+        [(x - x0) / w, 1.0 - (y - y0) / h]
+    });
     let px = 48u32;
     let texture = RgbaImage::from_fn(nx * px, ny * px, |x, y| {
         let (i, j) = (x / px, y / px);

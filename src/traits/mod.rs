@@ -306,7 +306,8 @@ pub fn leaf_traits(
     // the mesh's tessellation, not its shape).
     let mut rng = crate::util::rng::Rng::seed_from(1);
     let mut sums = vec![(Vector3::zeros(), 0.0f64); SLICES];
-    for p in sample_positions(mesh, 200 * SLICES, &mut rng) {
+    for sample in mesh.sample_surface(200 * SLICES, &mut rng) {
+        let p = sample.position.cast::<f64>();
         let k = slice_of((p - centroid).dot(&major));
         sums[k].0 += p.coords;
         sums[k].1 += 1.0;
@@ -401,44 +402,6 @@ pub fn leaf_traits(
         normal_world: normal,
         deformation,
     })
-}
-
-/// `count` points uniformly distributed over a mesh's surface (positions only; triangles
-/// indexing past the vertices are skipped).
-fn sample_positions(
-    mesh: &TriMesh,
-    count: usize,
-    rng: &mut crate::util::rng::Rng,
-) -> Vec<Point3<f64>> {
-    let corners: Vec<[Point3<f64>; 3]> = mesh
-        .triangles
-        .iter()
-        .filter_map(|t| {
-            let c = t.map(|v| mesh.positions.get(v as usize).map(|p| p.cast::<f64>()));
-            Some([c[0]?, c[1]?, c[2]?])
-        })
-        .collect();
-    let mut cumulative = Vec::with_capacity(corners.len());
-    let mut total = 0.0;
-    for [a, b, c] in &corners {
-        total += 0.5 * (b - a).cross(&(c - a)).norm();
-        cumulative.push(total);
-    }
-    if !positive(total) {
-        return Vec::new();
-    }
-    (0..count)
-        .map(|_| {
-            let target = rng.uniform() * total;
-            let t = cumulative
-                .partition_point(|&c| c < target)
-                .min(corners.len() - 1);
-            let [a, b, c] = corners[t];
-            let s = rng.uniform().sqrt();
-            let r = rng.uniform();
-            Point3::from(a.coords * (1.0 - s) + b.coords * (s * (1.0 - r)) + c.coords * (s * r))
-        })
-        .collect()
 }
 
 /// Point and unit tangent at arc-length fraction `s` ∈ [0, 1] of a polyline.
