@@ -28,6 +28,7 @@ pub mod ecosystem;
 pub mod edit;
 pub mod eval;
 pub mod graph;
+pub mod illustrate;
 pub mod leaf;
 pub mod lod;
 pub mod mesh;

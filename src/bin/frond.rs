@@ -289,6 +289,60 @@ enum Command {
     },
     /// Measure a reconstruction's organs: `traits.csv` (long form: plant, organ_id,
     /// organ_type, trait, value, unit) and `traits.json`, written into the folder (or --out).
+    /// Pen-and-ink drawing of a plant (seed 001): branch silhouettes and cross-hatching up to
+    /// second-order branches, foliage as abstract primitives outlined where the depth buffer
+    /// jumps, shading zones from the light. Writes a PNG and, with --svg, the same strokes as
+    /// an editable SVG; with --frames, a slow fly-around and its frame-to-frame coherence.
+    Illustrate {
+        /// A plant: a glb, a `frond reconstruct` folder or a synthetic dataset (its truth).
+        input: PathBuf,
+        /// The drawing (PNG). With --frames N, frames go to STEM_000.png … beside it.
+        #[arg(long)]
+        out: PathBuf,
+        /// Also write the strokes as SVG (layers: shadow, branches, hatching, foliage).
+        #[arg(long)]
+        svg: Option<PathBuf>,
+        /// detailed, abstract, sketchy, thuja or outlines (the seed's figures 7a, 7b, tree II,
+        /// 8a, 8b).
+        #[arg(long, default_value = "detailed")]
+        style: String,
+        /// Foliage primitive: disc, ellipse or lower_half (default: the style's).
+        #[arg(long)]
+        primitive: Option<String>,
+        /// Primitive diameter in model units (default: the style's, in units of the median
+        /// leaf length).
+        #[arg(long)]
+        primitive_size: Option<f64>,
+        /// Depth difference (model units) above which an outline is drawn.
+        #[arg(long)]
+        threshold: Option<f64>,
+        /// Full-shadow zone: thick, black, hatch or none.
+        #[arg(long)]
+        shadow: Option<String>,
+        /// Branch hatching: surface (sticks to the bark) or screen (the seed's, per frame).
+        #[arg(long)]
+        hatching: Option<String>,
+        /// Highest branch order drawn (0 = the stem).
+        #[arg(long)]
+        max_branch_order: Option<u32>,
+        /// Foliage particle budget.
+        #[arg(long)]
+        max_particles: Option<usize>,
+        /// Image size WIDTHxHEIGHT.
+        #[arg(long, default_value = "1200x900", value_parser = parse_size)]
+        size: (u32, u32),
+        /// View direction YAW,PITCH in degrees (default: three-quarter view from above).
+        #[arg(long, value_parser = parse_view)]
+        view: Option<(f64, f64)>,
+        /// Draw a fly-around of this many frames and report its coherence.
+        #[arg(long, default_value_t = 1)]
+        frames: usize,
+        /// Degrees the camera turns between frames.
+        #[arg(long, default_value_t = 0.5)]
+        turn: f64,
+        #[arg(long)]
+        seed: Option<u64>,
+    },
     Traits {
         /// A `frond reconstruct` output folder (or, with --truth, a synthetic dataset).
         reconstruction: PathBuf,
@@ -587,6 +641,20 @@ impl SegmentArgs {
         options.graph.knn = self.knn;
         Ok(options)
     }
+}
+
+fn parse_view(text: &str) -> Result<(f64, f64), String> {
+    let (yaw, pitch) = text
+        .split_once(',')
+        .ok_or_else(|| format!("'{text}' is not YAW,PITCH (degrees)"))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| format!("'{v}' is not a number of degrees"))
+    };
+    Ok((parse(yaw)?, parse(pitch)?))
 }
 
 fn parse_size(text: &str) -> Result<(u32, u32), String> {
@@ -1621,6 +1689,95 @@ fn main() -> Result<()> {
                 auto_densify: true,
             },
         ),
+        Command::Illustrate {
+            input,
+            out,
+            svg,
+            style,
+            primitive,
+            primitive_size,
+            threshold,
+            shadow,
+            hatching,
+            max_branch_order,
+            max_particles,
+            size,
+            view,
+            frames,
+            turn,
+            seed,
+        } => {
+            use frond::illustrate::{self as ill, parse_choice};
+            let plant = ill::read_sketch_plant(input)?;
+            let style: ill::Style = parse_choice("--style", style, ill::STYLES)?;
+            let overrides = ill::Overrides {
+                primitive: primitive
+                    .as_deref()
+                    .map(|t| parse_choice("--primitive", t, ill::PRIMITIVES))
+                    .transpose()?,
+                size: *primitive_size,
+                threshold: *threshold,
+                shadow: shadow
+                    .as_deref()
+                    .map(|t| parse_choice("--shadow", t, ill::SHADOWS))
+                    .transpose()?,
+                hatching: hatching
+                    .as_deref()
+                    .map(|t| parse_choice("--hatching", t, ill::HATCHINGS))
+                    .transpose()?,
+                max_branch_order: *max_branch_order,
+                max_particles: *max_particles,
+                seed: *seed,
+            };
+            let options = overrides.apply(style.options(plant.median_leaf_length()));
+            options.validate()?;
+            let views = ill::orbit_views(&plant, size.0, size.1, *view, *frames, *turn)?;
+            let mut renderer = frond::render::Renderer::new()?;
+            let progress = BarProgress::new();
+            let report = ill::illustrate_to_files(
+                &mut renderer,
+                &plant,
+                &input.display().to_string(),
+                &options,
+                &views,
+                ill::Outputs {
+                    png: out,
+                    svg: svg.as_deref(),
+                },
+                &progress,
+            )
+            .with_context(|| format!("drawing {}", input.display()))?;
+            progress.bar.finish_and_clear();
+            if let Some(first) = report.frames.first() {
+                let s = &first.stats;
+                eprintln!(
+                    "{} particles ({} lit, {} half shadow, {} full shadow), {} branches; {} strokes \
+                     (branches {}, hatching {}, foliage {}, shadow {}) -> {}",
+                    s.particles,
+                    s.particles_by_zone[0],
+                    s.particles_by_zone[1],
+                    s.particles_by_zone[2],
+                    s.branches_drawn,
+                    s.strokes,
+                    s.strokes_by_layer[1],
+                    s.strokes_by_layer[2],
+                    s.strokes_by_layer[3],
+                    s.strokes_by_layer[0],
+                    first.png
+                );
+            }
+            if let Some(c) = &report.coherence {
+                eprintln!(
+                    "coherence over {} frames: {:.1} % of the ink stays put (worst pair {:.1} %), \
+                     ink moves {:.2} px per frame",
+                    c.frames,
+                    100.0 * c.mean_stable_ink,
+                    100.0 * c.min_stable_ink,
+                    c.mean_motion_px
+                );
+            }
+            Ok(())
+        }
         Command::Traits {
             reconstruction,
             plant,

@@ -3,6 +3,7 @@
 //! the colour and id-and-depth pipelines, the texture sampler and the identity instance.
 
 use super::RenderError;
+use super::depth_difference::DepthDifferencePipeline;
 use super::meshes::{IDENTITY_INSTANCE, INSTANCE_BYTES, instance_bytes};
 use super::targets::{COLOR_FORMAT, COLOR_SAMPLES, DEPTH_FORMAT, Targets};
 
@@ -16,6 +17,8 @@ pub struct Renderer {
     pub(super) sampler: wgpu::Sampler,
     pub(super) color_pipeline: wgpu::RenderPipeline,
     pub(super) id_pipeline: wgpu::RenderPipeline,
+    /// The depth-difference compute pass (pen-and-ink outlines).
+    pub(super) depth_difference: DepthDifferencePipeline,
     pub(super) max_texture_side: u32,
     /// Samples per pixel of the colour pass.
     pub(super) color_samples: u32,
@@ -267,7 +270,9 @@ impl Renderer {
                 usage: wgpu::BufferUsages::VERTEX,
             })
         };
+        let depth_difference = DepthDifferencePipeline::new(&device);
         Ok(Self {
+            depth_difference,
             identity_instance,
             instance_buffer: None,
             max_texture_side: limits.max_texture_dimension_2d,

@@ -33,9 +33,14 @@
 //!   static meshes and instance batches, and the frames [`Renderer::render`],
 //!   [`Renderer::render_instanced`] ([`InstanceBatch`], [`FrameStats`]) and
 //!   [`Renderer::encode_color_frame`].
+//! - `depth_difference`: the depth-difference buffer of pen-and-ink outlines (seed 001 §4.3)
+//!   as a compute pass ([`Renderer::depth_difference`],
+//!   [`Renderer::render_with_depth_difference`]) and its CPU reference
+//!   [`depth_difference_cpu`].
 //! - `readback`: [`RenderOutput`] and copying textures back to the CPU (padded rows).
 
 mod camera;
+mod depth_difference;
 mod device;
 mod error;
 mod meshes;
@@ -48,6 +53,7 @@ mod targets;
 mod tests;
 
 pub use camera::ViewCamera;
+pub use depth_difference::depth_difference_cpu;
 pub use device::Renderer;
 pub use error::RenderError;
 pub use meshes::{GpuScene, IDENTITY_INSTANCE, InstanceTransform, MeshHandle, TextureHandle};

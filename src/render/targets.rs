@@ -83,7 +83,12 @@ impl Renderer {
             color_resolved,
             depth_msaa: view(&depth_msaa),
             id: texture("object id", wgpu::TextureFormat::R32Uint, 1, readable),
-            linear_depth: texture("linear depth", wgpu::TextureFormat::R32Float, 1, readable),
+            linear_depth: texture(
+                "linear depth",
+                wgpu::TextureFormat::R32Float,
+                1,
+                readable | wgpu::TextureUsages::TEXTURE_BINDING,
+            ),
             depth_single: view(&depth_single),
         });
     }

@@ -385,3 +385,107 @@ fn an_instance_draws_what_the_transformed_static_mesh_draws() {
             .is_err()
     );
 }
+
+#[test]
+fn depth_difference_on_the_gpu_matches_the_cpu_reference() {
+    let renderer = renderer();
+    let (width, height) = (67u32, 45u32);
+    // Background, a far slab, a nearer disc overlapping it, noise on the slab, and the frame.
+    let mut rng = crate::util::rng::Rng::seed_from(3);
+    let mut depth = vec![0.0f32; (width * height) as usize];
+    for y in 0..height {
+        for x in 0..width {
+            let at = (y * width + x) as usize;
+            if (5..60).contains(&x) && (3..40).contains(&y) {
+                depth[at] = 4.0 + 0.01 * rng.uniform() as f32;
+            }
+            let (dx, dy) = (x as f32 - 30.0, y as f32 - 20.0);
+            if dx * dx + dy * dy < 100.0 {
+                depth[at] = 2.5;
+            }
+            if x == 0 && y < 10 {
+                depth[at] = 3.0;
+            }
+        }
+    }
+    let background = 50.0;
+    let gpu = renderer
+        .depth_difference(&depth, width, height, background)
+        .unwrap();
+    let cpu = depth_difference_cpu(&depth, width, height, background);
+    assert_eq!(gpu.len(), cpu.len());
+    for (i, (g, c)) in gpu.iter().zip(&cpu).enumerate() {
+        assert!(
+            (g - c).abs() <= 1e-5 * c.abs().max(1.0),
+            "pixel ({}, {}): GPU {g} vs CPU {c}",
+            i % width as usize,
+            i / width as usize
+        );
+    }
+    // What the buffer means: the disc's rim is 1.5 in front of the slab, the slab's rim 46 in
+    // front of the background, the inside of either nothing.
+    let at = |x: u32, y: u32| cpu[(y * width + x) as usize];
+    assert!((at(30, 11) - 1.5).abs() < 0.02, "disc rim {}", at(30, 11));
+    assert_eq!(at(30, 20), 0.0);
+    assert!((at(5, 20) - 46.0).abs() < 0.02, "slab rim {}", at(5, 20));
+    assert_eq!(at(2, 42), 0.0, "background has no outline");
+    // Wrong sizes are refused.
+    assert!(
+        renderer
+            .depth_difference(&depth[1..], width, height, background)
+            .is_err()
+    );
+}
+
+#[test]
+fn rendered_depth_difference_outlines_the_front_square() {
+    let mut renderer = renderer();
+    let (mut scene, texture) = white_scene(&renderer);
+    // A square in front of a larger one, 0.5 nearer the camera.
+    renderer
+        .add_mesh(
+            &mut scene,
+            &square_at(Point3::new(0.1, 0.05, 0.0), 0.6),
+            texture,
+            1,
+            false,
+        )
+        .unwrap();
+    renderer
+        .add_mesh(
+            &mut scene,
+            &square_at(Point3::new(0.1, 0.05, 0.5), 0.15),
+            texture,
+            2,
+            false,
+        )
+        .unwrap();
+    let view = camera(160, 120);
+    let (out, difference) = renderer
+        .render_with_depth_difference(&scene, &view, &Lighting::default(), view.far as f32)
+        .unwrap();
+    let reference = depth_difference_cpu(&out.depth, view.width, view.height, view.far as f32);
+    let mismatched = difference
+        .iter()
+        .zip(&reference)
+        .filter(|(g, c)| (**g - **c).abs() > 1e-4 * c.abs().max(1.0))
+        .count();
+    assert_eq!(mismatched, 0);
+    // Pixels of the front square next to the back one stand about 0.5·(view ray) in front;
+    // its interior and the back square's interior stand in front of nothing.
+    let front_rim = (0..out.object_id.len())
+        .filter(|&i| out.object_id[i] == 2 && difference[i] > 0.2)
+        .count();
+    let front = out.object_id.iter().filter(|&&id| id == 2).count();
+    assert!(
+        front_rim > 20 && front_rim < front / 2,
+        "{front_rim} rim of {front}"
+    );
+    let back_inner = (0..out.object_id.len())
+        .filter(|&i| out.object_id[i] == 1 && difference[i] > 0.2 && difference[i] < 5.0)
+        .count();
+    assert_eq!(
+        back_inner, 0,
+        "the back square is in front of nothing but the background"
+    );
+}
