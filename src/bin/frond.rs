@@ -295,7 +295,12 @@ enum Command {
     /// an editable SVG; with --frames, a slow fly-around and its frame-to-frame coherence.
     Illustrate {
         /// A plant: a glb, a `frond reconstruct` folder or a synthetic dataset (its truth).
-        input: PathBuf,
+        #[arg(required_unless_present = "scene", conflicts_with = "scene")]
+        input: Option<PathBuf>,
+        /// A scene written by `frond scene` instead of one plant (its terrain hides what is
+        /// behind it).
+        #[arg(long)]
+        scene: Option<PathBuf>,
         /// The drawing (PNG). With --frames N, frames go to STEM_000.png … beside it.
         #[arg(long)]
         out: PathBuf,
@@ -1691,6 +1696,7 @@ fn main() -> Result<()> {
         ),
         Command::Illustrate {
             input,
+            scene,
             out,
             svg,
             style,
@@ -1708,7 +1714,14 @@ fn main() -> Result<()> {
             seed,
         } => {
             use frond::illustrate::{self as ill, parse_choice};
-            let plant = ill::read_sketch_plant(input)?;
+            let (input, plant) = match (input, scene) {
+                (_, Some(scene)) => (scene, ill::read_sketch_scene(scene)?),
+                (Some(input), None) => (
+                    input,
+                    ill::SketchScene::single(ill::read_sketch_plant(input)?),
+                ),
+                (None, None) => bail!("give a plant (glb or folder) or --scene scene.json"),
+            };
             let style: ill::Style = parse_choice("--style", style, ill::STYLES)?;
             let overrides = ill::Overrides {
                 primitive: primitive
@@ -1767,13 +1780,19 @@ fn main() -> Result<()> {
                 );
             }
             if let Some(c) = &report.coherence {
+                let layers: Vec<String> = c
+                    .by_layer
+                    .iter()
+                    .map(|(name, l)| format!("{name} {:.1} %", 100.0 * l.mean_stable_ink))
+                    .collect();
                 eprintln!(
-                    "coherence over {} frames: {:.1} % of the ink stays put (worst pair {:.1} %), \
-                     ink moves {:.2} px per frame",
+                    "coherence over {} frames ({:.2} px of motion per frame): {:.1} % of the ink \
+                     stays put (worst pair {:.1} %); {}",
                     c.frames,
-                    100.0 * c.mean_stable_ink,
-                    100.0 * c.min_stable_ink,
-                    c.mean_motion_px
+                    c.all.mean_motion_px,
+                    100.0 * c.all.mean_stable_ink,
+                    100.0 * c.all.min_stable_ink,
+                    layers.join(", ")
                 );
             }
             Ok(())

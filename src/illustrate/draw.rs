@@ -24,6 +24,11 @@ use crate::util::rng::Rng;
 /// Object ids of the frame's meshes: the foliage zones, then the branches from `BRANCH_ID`.
 const ZONE_IDS: [u32; 3] = [1, 2, 3];
 const BRANCH_ID: u32 = 16;
+const TERRAIN_ID: u32 = 8;
+/// Smallest primitive diameter in the first view (pixels).
+const MIN_PRIMITIVE_PX: f64 = 8.0;
+/// Branches thinner than this in the first view (pixels) are drawn as one line.
+const THIN_BRANCH_PX: f64 = 2.0;
 /// Darkness (1 − Lambert) below which a branch gets no hatching.
 const HATCH_FROM: f64 = 0.3;
 /// Ink coverage of the darkest hatched surface.
@@ -138,6 +143,9 @@ struct PreparedBranch {
     tangents: Vec<Vector3<f64>>,
     normals: Vec<Vector3<f64>>,
     mesh: TriMesh,
+    /// Thinner than a couple of pixels in the first view: one line along the axis, no
+    /// hatching.
+    thin: bool,
 }
 
 impl PreparedBranch {
@@ -165,13 +173,55 @@ struct HatchStroke {
 pub struct PreparedSketch {
     pub options: IllustrateOptions,
     pub particles: Vec<Particle>,
+    /// Diameter of each particle's primitive (model units).
+    pub sizes: Vec<f64>,
     pub zones: Vec<Zone>,
     pub light_world: Vector3<f64>,
     shapes: Vec<Shape>,
     branches: Vec<PreparedBranch>,
     hatch: Vec<HatchStroke>,
-    /// Hatch grid cell (model units).
+    /// Median hatch grid cell (model units).
     pub hatch_cell: f64,
+    /// Ground that hides what is behind it (drawn into the depth buffer, never stroked).
+    terrain: Option<TriMesh>,
+}
+
+/// What a drawing shows: plants in the world frame, the ground, and the up direction that
+/// sets the light.
+#[derive(Clone, Debug)]
+pub struct SketchScene {
+    pub plants: Vec<SketchPlant>,
+    pub terrain: Option<TriMesh>,
+    pub up_world: Vector3<f64>,
+}
+
+impl SketchScene {
+    pub fn single(plant: SketchPlant) -> Self {
+        Self {
+            up_world: plant.up_world,
+            plants: vec![plant],
+            terrain: None,
+        }
+    }
+
+    /// Every vertex (framing a view).
+    pub fn points(&self) -> Vec<Point3<f64>> {
+        self.plants.iter().flat_map(|p| p.points()).collect()
+    }
+
+    /// Median leaf length over the plants.
+    pub fn median_leaf_length(&self) -> f64 {
+        crate::util::stats::median(self.plants.iter().map(|p| p.median_leaf_length()))
+            .unwrap_or(1.0)
+    }
+}
+
+fn mean_point(points: &[Point3<f64>]) -> Option<Point3<f64>> {
+    (!points.is_empty()).then(|| {
+        Point3::from(
+            points.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / points.len() as f64,
+        )
+    })
 }
 
 /// A well-mixed 64-bit key from parts.
@@ -194,35 +244,68 @@ fn footprint(camera: &ViewCamera, z: f64) -> f64 {
 }
 
 impl PreparedSketch {
-    /// Preprocesses `plant` for drawing; `first_view` fixes the hatch grid (hatch spacing in
-    /// pixels at the plant's distance in that view), so that hatching sticks to the bark in a
-    /// fly-through.
+    /// Preprocesses `scene` for drawing. `first_view` fixes what depends on distance, so that
+    /// a fly-through stays coherent: each plant's particles are at least three pixels apart and
+    /// each branch's hatch grid is the hatch spacing, both as seen from that view.
     pub fn new(
-        plant: &SketchPlant,
+        scene: &SketchScene,
         options: &IllustrateOptions,
         first_view: &ViewCamera,
     ) -> Result<Self, IllustrateError> {
         options.validate()?;
-        let points = plant.points();
-        if points.is_empty() {
+        if scene
+            .plants
+            .iter()
+            .all(|p| p.leaves.is_empty() && p.branches.is_empty())
+        {
             return Err(IllustrateError::Empty(
                 "the plant has neither leaves nor branches".into(),
             ));
         }
-        let spacing = 0.6 * options.size;
-        let particles = plant.particles(spacing, options.max_particles, options.seed);
+        let depth_of = |p: &Point3<f64>| {
+            let z = (first_view.camera_from_world * p).z;
+            z.max(first_view.near)
+        };
+        let base_spacing = 0.6 * options.size;
+        let budget = (options.max_particles / scene.plants.len().max(1)).max(1);
+        let mut particles = Vec::new();
+        let mut spacings = Vec::new();
+        let mut leaf_offset = 0;
+        let mut sizes = Vec::new();
+        for (k, plant) in scene.plants.iter().enumerate() {
+            let points = plant.points();
+            let Some(centre) = mean_point(&points) else {
+                continue;
+            };
+            // A primitive is never smaller than MIN_PRIMITIVE_PX in the first view: far plants
+            // get fewer, larger primitives (the seed's particle reduction by distance).
+            let size = options
+                .size
+                .max(MIN_PRIMITIVE_PX * footprint(first_view, depth_of(&centre)));
+            let spacing = base_spacing * size / options.size;
+            for mut particle in plant.particles(spacing, budget, options.seed ^ k as u64) {
+                particle.leaf += leaf_offset;
+                particles.push(particle);
+                spacings.push(spacing);
+                sizes.push(size);
+            }
+            leaf_offset += plant.leaves.len();
+        }
         let light_world = light_direction(
-            &plant.up_world,
+            &scene.up_world,
             options.light_elevation_deg,
             options.light_azimuth_deg,
         );
         let zones = if options.shadow == ShadowStyle::None {
             vec![Zone::HalfShadow; particles.len()]
         } else {
+            let spacing =
+                crate::util::stats::median(spacings.iter().copied()).unwrap_or(base_spacing);
+            let size = crate::util::stats::median(sizes.iter().copied()).unwrap_or(options.size);
             shading_zones(
                 &particles,
                 &light_world,
-                0.5 * options.size,
+                0.5 * size,
                 spacing,
                 options.full_shadow_layers,
             )
@@ -248,34 +331,47 @@ impl PreparedSketch {
                 }
             })
             .collect();
-        let n = points.len() as f64;
-        let centre = Point3::from(points.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / n);
-        let centre_depth = first_view
-            .project(&centre)
-            .map(|(_, z)| z)
-            .unwrap_or_else(|| (first_view.camera_from_world * centre).z.abs().max(1e-9));
-        let hatch_cell = options.hatch_spacing_px * footprint(first_view, centre_depth);
-        let branches: Vec<PreparedBranch> = plant
-            .branches
-            .iter()
-            .filter(|b| b.order <= options.max_branch_order)
-            .filter_map(|b| prepare_branch(&b.axis_world, &b.radius, hatch_cell))
-            .collect();
-        let hatch = branches
-            .iter()
-            .enumerate()
-            .flat_map(|(i, b)| {
-                surface_hatching(
-                    i,
-                    b,
+        let pen_share = options.pen_px / options.hatch_spacing_px;
+        let mut branches = Vec::new();
+        let mut hatch = Vec::new();
+        let mut cells = Vec::new();
+        for plant in &scene.plants {
+            for b in plant
+                .branches
+                .iter()
+                .filter(|b| b.order <= options.max_branch_order)
+            {
+                let Some(middle) = b.axis_world.get(b.axis_world.len() / 2) else {
+                    continue;
+                };
+                let cell = options.hatch_spacing_px * footprint(first_view, depth_of(middle));
+                let Some(mut prepared) = prepare_branch(&b.axis_world, &b.radius, cell) else {
+                    continue;
+                };
+                let mean_radius = b.radius.iter().sum::<f64>() / b.radius.len().max(1) as f64;
+                prepared.thin =
+                    2.0 * mean_radius < THIN_BRANCH_PX * footprint(first_view, depth_of(middle));
+                if prepared.thin {
+                    branches.push(prepared);
+                    cells.push(cell);
+                    continue;
+                }
+                hatch.extend(surface_hatching(
+                    branches.len(),
+                    &prepared,
                     &light_world,
-                    hatch_cell,
-                    options.pen_px / options.hatch_spacing_px,
-                )
-            })
-            .collect();
+                    cell,
+                    pen_share,
+                ));
+                branches.push(prepared);
+                cells.push(cell);
+            }
+        }
+        let hatch_cell = crate::util::stats::median(cells).unwrap_or(0.0);
         Ok(Self {
             options: options.clone(),
+            sizes,
+            terrain: scene.terrain.clone(),
             particles,
             zones,
             light_world,
@@ -309,7 +405,7 @@ impl PreparedSketch {
                 projected.push(None);
                 continue;
             }
-            let r_px = 0.5 * options.size * camera.fx / z;
+            let r_px = 0.5 * self.sizes[i] * camera.fx / z;
             projected.push(Some((c, z, r_px)));
             let corners = ((std::f64::consts::TAU * r_px / 3.0).round() as usize).clamp(8, 48);
             let mesh = &mut zone_meshes[self.zones[i] as usize];
@@ -348,6 +444,9 @@ impl PreparedSketch {
         }
         for (i, branch) in self.branches.iter().enumerate() {
             renderer.add_mesh(&mut scene, &branch.mesh, white, BRANCH_ID + i as u32, false)?;
+        }
+        if let Some(terrain) = &self.terrain {
+            renderer.add_mesh(&mut scene, terrain, white, TERRAIN_ID, false)?;
         }
         let lighting = Lighting {
             direction_world: self.light_world,
@@ -489,7 +588,8 @@ impl PreparedSketch {
         strokes: &mut Vec<Stroke>,
     ) {
         for (b, branch) in self.branches.iter().enumerate() {
-            for side in [-1.0f64, 1.0] {
+            let sides: &[f64] = if branch.thin { &[0.0] } else { &[-1.0, 1.0] };
+            for &side in sides {
                 let flags: Vec<(Point2<f64>, bool)> = (0..branch.samples.len())
                     .filter_map(|j| {
                         let c = branch.samples[j];
@@ -498,7 +598,7 @@ impl PreparedSketch {
                         let (p, z_s) = camera.project(&s)?;
                         let (pc, _) = camera.project(&c)?;
                         let toward = (pc - p)
-                            .try_normalize(1e-12)
+                            .try_normalize(1e-9)
                             .unwrap_or_else(nalgebra::Vector2::zeros);
                         let test = p + toward * 0.8;
                         let visible = buffers.index(&test).is_some_and(|at| {
@@ -514,7 +614,7 @@ impl PreparedSketch {
                         layer: Layer::Branch,
                         points_px: run,
                         width_px: self.options.pen_px * 1.25,
-                        key: key(&[2, b as u64, (side > 0.0) as u64, start as u64]),
+                        key: key(&[2, b as u64, (side + 1.0) as u64, start as u64]),
                     });
                 }
             }
@@ -789,6 +889,7 @@ fn prepare_branch(axis: &[Point3<f64>], radius: &[f64], cell: f64) -> Option<Pre
         tangents,
         normals,
         mesh: TriMesh::default(),
+        thin: false,
     };
     let sides = 16usize;
     let mut mesh = TriMesh::default();

@@ -24,7 +24,7 @@ pub mod plant;
 
 use serde::{Deserialize, Serialize};
 
-pub use draw::{Drawing, DrawingStats, Layer, PreparedSketch, Stroke};
+pub use draw::{Drawing, DrawingStats, Layer, PreparedSketch, SketchScene, Stroke};
 pub use plant::{Particle, SketchBranch, SketchPlant, Zone, read_sketch_plant};
 
 /// Why an illustration failed.
@@ -231,7 +231,7 @@ pub const HATCHINGS: &[&str] = &["surface", "screen"];
 /// three-quarter view), then `frames − 1` more turning `turn_deg` each about the plant's up
 /// (a slow fly-around).
 pub fn orbit_views(
-    plant: &SketchPlant,
+    plant: &SketchScene,
     width: u32,
     height: u32,
     view_deg: Option<(f64, f64)>,
@@ -355,7 +355,7 @@ pub struct Outputs<'a> {
 /// atomically, then `STEM.json` (the report, also returned). `progress` advances per frame.
 pub fn illustrate_to_files(
     renderer: &mut crate::render::Renderer,
-    plant: &SketchPlant,
+    plant: &SketchScene,
     input: &str,
     options: &IllustrateOptions,
     views: &[crate::render::ViewCamera],
@@ -376,7 +376,7 @@ pub fn illustrate_to_files(
     let prepared = PreparedSketch::new(plant, options, first)?;
     progress.stage("drawing", views.len() as u64);
     let mut frames = Vec::with_capacity(views.len());
-    let mut kept: Vec<(Drawing, image::GrayImage)> = Vec::new();
+    let mut kept: Vec<Drawing> = Vec::new();
     for (k, view) in views.iter().enumerate() {
         let start = std::time::Instant::now();
         let drawing = prepared.draw(renderer, view)?;
@@ -402,7 +402,7 @@ pub fn illustrate_to_files(
             seconds,
         });
         if views.len() > 1 {
-            kept.push((drawing, raster));
+            kept.push(drawing);
         }
         progress.advance(1);
     }
@@ -413,17 +413,59 @@ pub fn illustrate_to_files(
         options: options.clone(),
         median_leaf_length: plant.median_leaf_length(),
         branches_drawn: plant
-            .branches
+            .plants
             .iter()
+            .flat_map(|p| &p.branches)
             .filter(|b| b.order <= options.max_branch_order)
             .count(),
         hatch_cell: prepared.hatch_cell,
         frames,
-        coherence: (kept.len() > 1).then(|| coherence::coherence(&kept)),
+        coherence: if kept.len() > 1 {
+            Some(coherence::coherence(&kept)?)
+        } else {
+            None
+        },
         adapter: renderer.adapter_description(),
     };
     let json = serde_json::to_string_pretty(&report)
         .map_err(|e| IllustrateError::Raster(e.to_string()))?;
     write(&out.with_extension("json"), json.as_bytes())?;
     Ok(report)
+}
+
+/// A scene written by `frond scene` as a drawing: every instance's master (read once per
+/// master) moved to its place, and the terrain, which hides what stands behind it. Each plant's
+/// up becomes the world's +z, the terrain's up.
+pub fn read_sketch_scene(path: &std::path::Path) -> Result<SketchScene, IllustrateError> {
+    let scene =
+        crate::ecosystem::EcosystemScene::read(path).map_err(|e| IllustrateError::Input {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
+    let mut masters = Vec::with_capacity(scene.plants.len());
+    for k in 0..scene.plants.len() {
+        masters.push(SketchPlant::from_glb(&scene.plant_path(path, k))?);
+    }
+    let mut plants = Vec::with_capacity(scene.instances.len());
+    for instance in &scene.instances {
+        let Some(master) = masters.get(instance.plant) else {
+            return Err(IllustrateError::Input {
+                path: path.display().to_string(),
+                message: format!(
+                    "an instance names plant {} of {}",
+                    instance.plant,
+                    masters.len()
+                ),
+            });
+        };
+        let world_from_plant = instance.world_from_plant(&scene.plants[instance.plant]);
+        let mut plant = master.transformed(&world_from_plant);
+        plant.up_world = nalgebra::Vector3::z();
+        plants.push(plant);
+    }
+    Ok(SketchScene {
+        plants,
+        terrain: Some(scene.terrain.mesh(1.0)),
+        up_world: nalgebra::Vector3::z(),
+    })
 }

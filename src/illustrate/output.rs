@@ -20,20 +20,31 @@ const SHIFT: i32 = 4;
 impl Drawing {
     /// The drawing as a grey image: 255 paper, 0 ink.
     pub fn raster(&self) -> Result<GrayImage, IllustrateError> {
+        self.raster_layers(None)
+    }
+
+    /// One layer of the drawing (the black shadow area belongs to [`Layer::Shadow`]), or all
+    /// of it with `None`.
+    pub fn raster_layers(&self, only: Option<Layer>) -> Result<GrayImage, IllustrateError> {
         let (w, h) = (self.width as i32, self.height as i32);
         let mut mat =
             Mat::new_rows_cols_with_default(h, w, opencv::core::CV_8UC1, Scalar::all(255.0))
                 .map_err(cv)?;
         {
             let data = mat.data_bytes_mut().map_err(cv)?;
+            let fill_shadow = only.is_none_or(|l| l == Layer::Shadow);
             for (pixel, &fill) in data.iter_mut().zip(&self.shadow_fill) {
-                if fill {
+                if fill && fill_shadow {
                     *pixel = 0;
                 }
             }
         }
         let scale = (1 << SHIFT) as f64;
-        for stroke in &self.strokes {
+        for stroke in self
+            .strokes
+            .iter()
+            .filter(|s| only.is_none_or(|l| l == s.layer))
+        {
             // COLMAP pixel (i, j) is centred at (i + ½, j + ½); OpenCV's at (i, j).
             let points: Vector<Point> = stroke
                 .points_px

@@ -116,16 +116,17 @@ impl SketchPlant {
             if part.mesh.triangles.is_empty() {
                 continue;
             }
+            // Merged parts (a scene's masters: all leaves of an atlas page, all branches of a
+            // colour in one mesh) come apart into their connected pieces.
+            let pieces = connected_components(&part.mesh);
             if part.name.starts_with("leaf") || part.alpha_mask {
-                leaves.push(part.mesh);
+                leaves.extend(pieces);
             } else {
-                tubes.push((part.name, part.mesh));
+                tubes.extend(pieces);
             }
         }
-        let mut axes: Vec<(Vec<Point3<f64>>, Vec<f64>)> = tubes
-            .iter()
-            .filter_map(|(_, mesh)| tube_axis(mesh))
-            .collect();
+        let mut axes: Vec<(Vec<Point3<f64>>, Vec<f64>)> =
+            tubes.iter().filter_map(tube_axis).collect();
         let parents = branch_tree(&mut axes, &up_world);
         let orders = orders(&parents);
         let branches = axes
@@ -144,6 +145,39 @@ impl SketchPlant {
             branches,
             leaves,
         })
+    }
+
+    /// The plant moved by a similarity (a scene instance): positions mapped, radii scaled.
+    pub fn transformed(&self, world_from_plant: &nalgebra::Similarity3<f64>) -> Self {
+        let scale = world_from_plant.scaling();
+        let similarity = world_from_plant.cast::<f32>();
+        Self {
+            up_world: (world_from_plant * self.up_world).normalize(),
+            branches: self
+                .branches
+                .iter()
+                .map(|b| SketchBranch {
+                    id: b.id,
+                    order: b.order,
+                    axis_world: b.axis_world.iter().map(|p| world_from_plant * p).collect(),
+                    radius: b.radius.iter().map(|r| r * scale).collect(),
+                })
+                .collect(),
+            leaves: self
+                .leaves
+                .iter()
+                .map(|leaf| {
+                    let mut moved = leaf.clone();
+                    for p in &mut moved.positions {
+                        *p = similarity * *p;
+                    }
+                    for n in &mut moved.normals {
+                        *n = (similarity * *n).normalize();
+                    }
+                    moved
+                })
+                .collect(),
+        }
     }
 
     /// Every vertex of the plant (framing a view).
@@ -401,6 +435,68 @@ fn argmax(values: &[f64]) -> Option<usize> {
 }
 
 /// Vertices merged where they coincide (tube seams), and the mesh's edges between them.
+/// The connected pieces of a mesh (vertices that coincide count as one), each with its own
+/// vertices; pieces keep the order of their first triangle.
+pub fn connected_components(mesh: &TriMesh) -> Vec<TriMesh> {
+    let n = mesh.positions.len();
+    if n == 0 {
+        return Vec::new();
+    }
+    let scale = mesh
+        .bounds()
+        .map(|(lo, hi)| (hi - lo).norm() as f64)
+        .unwrap_or(1.0)
+        .max(1e-12);
+    let quantum = scale * 1e-6;
+    let mut sets = crate::util::union_find::UnionFind::new(n);
+    let mut first_at = std::collections::HashMap::new();
+    for (i, p) in mesh.positions.iter().enumerate() {
+        let key = quantize(&p.cast::<f64>(), quantum);
+        let first = *first_at.entry(key).or_insert(i);
+        sets.union(first, i);
+    }
+    for t in &mesh.triangles {
+        sets.union(t[0] as usize, t[1] as usize);
+        sets.union(t[0] as usize, t[2] as usize);
+    }
+    let mut piece_of_root = std::collections::HashMap::new();
+    let mut pieces: Vec<(TriMesh, Vec<u32>)> = Vec::new();
+    let has_normals = mesh.normals.len() == n;
+    for t in &mesh.triangles {
+        let root = sets.find(t[0] as usize);
+        let k = *piece_of_root.entry(root).or_insert_with(|| {
+            pieces.push((TriMesh::default(), vec![u32::MAX; n]));
+            pieces.len() - 1
+        });
+        let (piece, remap) = &mut pieces[k];
+        let mut corners = [0u32; 3];
+        for (c, &v) in corners.iter_mut().zip(t) {
+            let v = v as usize;
+            if remap[v] == u32::MAX {
+                remap[v] = piece.positions.len() as u32;
+                piece.positions.push(mesh.positions[v]);
+                piece
+                    .uvs
+                    .push(mesh.uvs.get(v).copied().unwrap_or([0.0, 0.0]));
+                if has_normals {
+                    piece.normals.push(mesh.normals[v]);
+                }
+            }
+            *c = remap[v];
+        }
+        piece.triangles.push(corners);
+    }
+    pieces
+        .into_iter()
+        .map(|(mut piece, _)| {
+            if piece.normals.len() != piece.positions.len() {
+                piece.compute_normals();
+            }
+            piece
+        })
+        .collect()
+}
+
 /// Neighbours of each vertex with the edge length.
 type Adjacency = Vec<Vec<(usize, f64)>>;
 
@@ -695,6 +791,30 @@ mod tests {
             (thick - thin).abs() > 0.01,
             "radius should taper: {thick} vs {thin}"
         );
+    }
+
+    #[test]
+    fn merged_meshes_come_apart() {
+        let skeleton = |x: f64| {
+            crate::branch::spline::Spline::new(vec![
+                Point3::new(x, 0.0, 0.0),
+                Point3::new(x, 0.0, 1.0),
+            ])
+            .expect("spline")
+        };
+        let mut merged =
+            GeneralizedCylinder::new(skeleton(0.0), 0.05, 0.05).mesh(&CylinderMeshing::default());
+        merged.append(
+            &GeneralizedCylinder::new(skeleton(1.0), 0.05, 0.05).mesh(&CylinderMeshing::default()),
+        );
+        let pieces = connected_components(&merged);
+        assert_eq!(pieces.len(), 2);
+        let triangles: usize = pieces.iter().map(|p| p.triangles.len()).sum();
+        assert_eq!(triangles, merged.triangles.len());
+        for p in &pieces {
+            p.validate().expect("valid piece");
+        }
+        assert!(connected_components(&TriMesh::default()).is_empty());
     }
 
     #[test]
