@@ -1447,12 +1447,21 @@ fn lod(
     frond::util::atomic::write_atomic(out, &chain.to_glb(threshold_px))
         .with_context(|| format!("writing {}", out.display()))?;
     let summary = chain.summary(threshold_px);
+    // The billboard against the full plant where it takes over (8 directions, 5° above the
+    // horizon, the render core's default light).
+    let switch = match renderer.as_mut() {
+        Some(renderer) => chain
+            .switch_luminance(renderer, threshold_px, 8, 5.0)
+            .context("measuring the billboard's brightness at its switch distance")?,
+        None => None,
+    };
     if json {
         println!(
             "{}",
             serde_json::to_string_pretty(&serde_json::json!({
                 "input": input, "output": out, "seconds": seconds,
-                "radius_m": chain.radius, "levels": summary
+                "radius_m": chain.radius, "levels": summary,
+                "billboard_switch_luminance": switch
             }))?
         );
         return Ok(());
@@ -1476,6 +1485,18 @@ fn lod(
             1e3 * level.error_m,
             level.switch_distance_m,
             level.screen_coverage
+        );
+    }
+    if let Some(checks) = switch.filter(|c| !c.is_empty()) {
+        let mean = checks.iter().map(|c| c.difference_percent).sum::<f64>() / checks.len() as f64;
+        let worst = checks
+            .iter()
+            .map(|c| c.difference_percent.abs())
+            .fold(0.0, f64::max);
+        println!(
+            "billboard at its switch distance: {mean:+.1} % mean luminance against the full plant \
+             (worst of {} directions {worst:.1} %)",
+            checks.len()
         );
     }
     Ok(())

@@ -268,13 +268,17 @@ pub fn run_flythrough(
         for level in &lod.levels {
             let mut handles = Vec::with_capacity(level.parts.len());
             for part in &level.parts {
-                handles.push(renderer.add_instanced_mesh(
+                let handle = renderer.add_instanced_mesh(
                     &mut gpu,
                     &part.mesh,
                     textures[part.texture],
                     1 + plant as u32,
                     part.alpha_test,
-                )?);
+                )?;
+                if part.unlit || part.back_uv_offset != 0.0 {
+                    renderer.set_shading(&gpu, handle, part.shading())?;
+                }
+                handles.push(handle);
             }
             levels.push(handles);
         }

@@ -24,6 +24,11 @@ pub struct AssetPart {
     pub alpha_test: bool,
     /// Leaves (double-sided foliage) rather than wood.
     pub is_leaf: bool,
+    /// Drawn as its texture's colour, without lighting (a billboard baked lit;
+    /// `KHR_materials_unlit` in a glb).
+    pub unlit: bool,
+    /// Added to u on back faces (a two-sided billboard's back tiles); 0 = none.
+    pub back_uv_offset: f32,
 }
 
 /// A renderable plant: parts and their textures (sRGB).
@@ -52,6 +57,16 @@ fn srgb_texel(linear: [f32; 4]) -> Rgba<u8> {
     ])
 }
 
+impl AssetPart {
+    /// How the render core shades it.
+    pub fn shading(&self) -> crate::render::Shading {
+        crate::render::Shading {
+            unlit: self.unlit,
+            back_uv_offset: self.back_uv_offset,
+        }
+    }
+}
+
 impl PlantAsset {
     /// Leaves merged per atlas page (cut-out), branches merged per colour (a 1×1 texture).
     pub fn from_model(model: &PlantModel) -> Self {
@@ -71,6 +86,8 @@ impl PlantAsset {
                 texture: asset.textures.len() - 1,
                 alpha_test: true,
                 is_leaf: true,
+                unlit: false,
+                back_uv_offset: 0.0,
             });
         }
         // (colour, part index) of each branch colour seen so far.
@@ -88,6 +105,8 @@ impl PlantAsset {
                         texture: asset.textures.len() - 1,
                         alpha_test: false,
                         is_leaf: false,
+                        unlit: false,
+                        back_uv_offset: 0.0,
                     });
                     wood.push((branch.color, asset.parts.len() - 1));
                     asset.parts.len() - 1
@@ -230,10 +249,13 @@ fn parts_from_glb(glb_parts: Vec<GlbPart>, textures: &mut Vec<RgbaImage>) -> Vec
         };
         let is_leaf = part.name.starts_with("leaf") || part.alpha_mask;
         let alpha_test = part.alpha_mask || (is_leaf && part.image.is_some());
-        match merged
-            .iter_mut()
-            .find(|m| m.texture == texture && m.alpha_test == alpha_test && m.is_leaf == is_leaf)
-        {
+        match merged.iter_mut().find(|m| {
+            m.texture == texture
+                && m.alpha_test == alpha_test
+                && m.is_leaf == is_leaf
+                && m.unlit == part.unlit
+                && m.back_uv_offset == part.back_uv_offset
+        }) {
             Some(existing) => existing.mesh.append(&part.mesh),
             None => {
                 let name = if is_leaf {
@@ -247,6 +269,8 @@ fn parts_from_glb(glb_parts: Vec<GlbPart>, textures: &mut Vec<RgbaImage>) -> Vec
                     texture,
                     alpha_test,
                     is_leaf,
+                    unlit: part.unlit,
+                    back_uv_offset: part.back_uv_offset,
                 });
             }
         }

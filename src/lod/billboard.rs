@@ -38,8 +38,10 @@ pub struct StarBillboard {
     pub atlas: RgbaImage,
     /// μ: largest distance from a vertex of the full plant to the nearest quad plane.
     pub error_world: f64,
-    /// The camera each quad's tile was rendered from.
+    /// The camera each quad's front tile was rendered from.
     pub bake_cameras: Vec<ViewCamera>,
+    /// What back faces add to u: the back tiles fill the atlas's right half.
+    pub back_uv_offset: f32,
 }
 
 /// The plant's vertical axis (through the centre of its bounds), horizontal reach from that
@@ -62,8 +64,9 @@ fn star_frame(asset: &PlantAsset) -> Option<StarFrame> {
     })
 }
 
-/// Bakes the star billboard of `asset`: one unlit render (albedo) per quad, seen along the
-/// quad's normal from 20 plant radii away, so the quad's plane maps to its tile exactly.
+/// Bakes the star billboard of `asset`: one render per quad under the render core's default
+/// light, seen along the quad's normal from 20 plant radii away, so the quad's plane maps to
+/// its tile exactly. The billboard is meant to be drawn unlit (`KHR_materials_unlit`).
 pub fn bake_star(
     renderer: &mut Renderer,
     asset: &PlantAsset,
@@ -85,14 +88,13 @@ pub fn bake_star(
         } else {
             renderer.add_texture(&mut gpu, &asset.textures[part.texture])
         };
-        renderer.add_mesh(&mut gpu, &part.mesh, texture, 1, part.alpha_test)?;
+        let handle = renderer.add_mesh(&mut gpu, &part.mesh, texture, 1, part.alpha_test)?;
+        renderer.set_shading(&gpu, handle, part.shading())?;
     }
-    let albedo = Lighting {
-        ambient: 1.0,
-        key: 0.0,
-        fill: 0.0,
-        ..Lighting::default()
-    };
+    // The tiles hold the plant as lit by the render core's default light, and the billboard
+    // is drawn unlit: lighting the quads again with their own (vertical) normals made distant
+    // plants darker than the plants they replace.
+    let lit = Lighting::default();
     let center = Point3::new(
         frame.axis.x,
         frame.axis.y,
@@ -100,7 +102,10 @@ pub fn bake_star(
     );
     let extent = frame.reach.max(0.5 * height);
     let distance = 20.0 * extent;
-    let mut atlas = RgbaImage::new(tile_width * quads as u32, tile_height);
+    // Front tiles, then back tiles (each quad seen from behind, mirrored so that the quad's
+    // uvs plus `back_uv_offset` address the same world points): the plant's sides are lit
+    // differently, and a one-sided tile showed the lit side's mirror image from the dark side.
+    let mut atlas = RgbaImage::new(2 * tile_width * quads as u32, tile_height);
     let mut mesh = TriMesh::default();
     let mut bake_cameras = Vec::with_capacity(quads);
     let mut error_world = 0.0f64;
@@ -125,13 +130,30 @@ pub fn bake_star(
             near: (distance - 2.0 * extent) as f64,
             far: (distance + 2.0 * extent) as f64,
         };
-        let out = renderer.render(&gpu, &camera, &albedo)?;
+        let out = renderer.render(&gpu, &camera, &lit)?;
         let offset = k as u32 * tile_width;
         for y in 0..tile_height {
             for x in 0..tile_width {
                 let mut texel = *out.color.get_pixel(x, y);
                 texel[3] = if out.id_at(x, y) != 0 { 255 } else { 0 };
                 atlas.put_pixel(offset + x, y, texel);
+            }
+        }
+        let back_camera = ViewCamera {
+            camera_from_world: look_at(
+                (center - normal * distance).cast::<f64>(),
+                center.cast::<f64>(),
+            ),
+            ..camera.clone()
+        };
+        let back = renderer.render(&gpu, &back_camera, &lit)?;
+        let back_offset = (quads + k) as u32 * tile_width;
+        for y in 0..tile_height {
+            for x in 0..tile_width {
+                let mirrored = tile_width - 1 - x;
+                let mut texel = *back.color.get_pixel(mirrored, y);
+                texel[3] = if back.id_at(mirrored, y) != 0 { 255 } else { 0 };
+                atlas.put_pixel(back_offset + x, y, texel);
             }
         }
         // The quad's corners, with uvs where the bake camera sees them.
@@ -153,8 +175,10 @@ pub fn bake_star(
                 (pixel.y / tile_height as f64) as f32,
             ]);
         }
-        mesh.triangles.push([base, base + 1, base + 2]);
-        mesh.triangles.push([base, base + 2, base + 3]);
+        // Wound so that the rasterizer calls the side facing +normal (where the front tile
+        // was baked from) the front face.
+        mesh.triangles.push([base, base + 2, base + 1]);
+        mesh.triangles.push([base, base + 3, base + 2]);
         bake_cameras.push(camera);
     }
     for part in &asset.parts {
@@ -175,14 +199,33 @@ pub fn bake_star(
         atlas,
         error_world,
         bake_cameras,
+        back_uv_offset: 0.5,
     })
 }
 
-/// Spreads colour from opaque texels into transparent ones (`rounds` rings) so that filtered
-/// and mipmapped lookups at the silhouette do not pull in the background.
+/// Spreads colour from the interior of the opaque texels (`rounds` rings) into the texels on
+/// the silhouette, whose baked colour the multisampled render blended with the black
+/// background, and into the transparent ones, so that filtered and mipmapped lookups do not
+/// pull in the background. Alpha is kept.
 fn dilate_colors(image: &mut RgbaImage, rounds: usize) {
     let (w, h) = image.dimensions();
-    let mut filled: Vec<bool> = image.pixels().map(|p| p[3] > 0).collect();
+    let opaque = |x: i64, y: i64| {
+        x >= 0
+            && y >= 0
+            && x < w as i64
+            && y < h as i64
+            && image.get_pixel(x as u32, y as u32)[3] > 0
+    };
+    let mut filled: Vec<bool> = (0..h as i64)
+        .flat_map(|y| (0..w as i64).map(move |x| (x, y)))
+        .map(|(x, y)| {
+            opaque(x, y)
+                && opaque(x - 1, y)
+                && opaque(x + 1, y)
+                && opaque(x, y - 1)
+                && opaque(x, y + 1)
+        })
+        .collect();
     for _ in 0..rounds {
         let mut updates = Vec::new();
         for y in 0..h {
@@ -214,7 +257,8 @@ fn dilate_colors(image: &mut RgbaImage, rounds: usize) {
             break;
         }
         for (x, y, rgb) in updates {
-            image.put_pixel(x, y, Rgba([rgb[0], rgb[1], rgb[2], 0]));
+            let alpha = image.get_pixel(x, y)[3];
+            image.put_pixel(x, y, Rgba([rgb[0], rgb[1], rgb[2], alpha]));
             filled[(y * w + x) as usize] = true;
         }
     }

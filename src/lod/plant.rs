@@ -140,6 +140,10 @@ pub fn build_plant_lod(
                 texture: textures.len() - 1,
                 alpha_test: true,
                 is_leaf: true,
+                // The atlas is baked under the render core's default light, back tiles
+                // beside the front ones.
+                unlit: true,
+                back_uv_offset: star.back_uv_offset,
             }],
             error_world: star.error_world,
             is_billboard: true,
@@ -306,6 +310,8 @@ impl PlantLod {
                     color: [1.0; 4],
                     double_sided: true,
                     alpha_mask: part.alpha_test,
+                    unlit: part.unlit,
+                    back_uv_offset: part.back_uv_offset,
                 })
                 .collect();
             let name = format!("plant_LOD{i}");
@@ -401,10 +407,158 @@ impl PlantLod {
     }
 }
 
+/// Brightness of the billboard against the full plant where one replaces the other.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SwitchLuminance {
+    /// Azimuth of the view about the plant's up (degrees).
+    pub azimuth_deg: f64,
+    /// Mean linear luminance over the pixels each covers.
+    pub full: f64,
+    pub billboard: f64,
+    /// (billboard − full) / full, percent.
+    pub difference_percent: f64,
+}
+
+/// Mean linear luminance (Rec. 709) of what a render covers: the luminance of every pixel
+/// summed (the background is black, so a pixel the multisampled edge only partly covers adds
+/// its covered share) over the pixels whose centre is covered (the id pass: an unbiased count
+/// of the covered area).
+fn mean_luminance(out: &crate::render::RenderOutput) -> Option<f64> {
+    let decode = |v: u8| {
+        let c = v as f64 / 255.0;
+        if c <= 0.04045 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        }
+    };
+    let sum: f64 = out
+        .color
+        .pixels()
+        .map(|p| 0.2126 * decode(p[0]) + 0.7152 * decode(p[1]) + 0.0722 * decode(p[2]))
+        .sum();
+    let covered = out.object_id.iter().filter(|&&id| id != 0).count();
+    (covered > 0).then(|| sum / covered as f64)
+}
+
+impl PlantLod {
+    /// The full plant and its billboard rendered from `azimuths` directions `elevation_deg`
+    /// above the horizon at the billboard's switch distance on the reference viewport (λ =
+    /// `threshold_px`), under the render core's default light, as a fly-through draws them;
+    /// `None` without a billboard level.
+    pub fn switch_luminance(
+        &self,
+        renderer: &mut Renderer,
+        threshold_px: f64,
+        azimuths: usize,
+        elevation_deg: f64,
+    ) -> Result<Option<Vec<SwitchLuminance>>, RenderError> {
+        let Some(billboard) = self.levels.iter().position(|l| l.is_billboard) else {
+            return Ok(None);
+        };
+        let distance = switch_distance(
+            self.levels[billboard].error_world,
+            &REFERENCE_VIEWPORT,
+            threshold_px,
+        )
+        .max(4.0 * self.radius as f64);
+        let mut scenes = Vec::new();
+        for level in [0, billboard] {
+            let mut gpu = renderer.new_scene();
+            let textures: Vec<_> = self
+                .textures
+                .iter()
+                .map(|t| renderer.add_cutout_texture(&mut gpu, t))
+                .collect();
+            for part in &self.levels[level].parts {
+                let Some(&texture) = textures.get(part.texture) else {
+                    continue;
+                };
+                let handle =
+                    renderer.add_mesh(&mut gpu, &part.mesh, texture, 1, part.alpha_test)?;
+                renderer.set_shading(&gpu, handle, part.shading())?;
+            }
+            scenes.push(gpu);
+        }
+        let focal =
+            REFERENCE_VIEWPORT.height_px / (2.0 * (0.5 * REFERENCE_VIEWPORT.fov_y_rad).tan());
+        let centre = self.center.cast::<f64>();
+        // A window around the plant at the reference viewport's scale.
+        let side = ((4.0 * self.radius as f64 * focal / distance).ceil() as u32).clamp(16, 1024);
+        let mut out = Vec::with_capacity(azimuths);
+        for k in 0..azimuths.max(1) {
+            let azimuth = std::f64::consts::TAU * k as f64 / azimuths.max(1) as f64;
+            let elevation = elevation_deg.to_radians();
+            let eye = centre
+                + nalgebra::Vector3::new(
+                    azimuth.cos() * elevation.cos(),
+                    azimuth.sin() * elevation.cos(),
+                    elevation.sin(),
+                ) * distance;
+            let camera = crate::render::ViewCamera {
+                width: side,
+                height: side,
+                fx: focal,
+                fy: focal,
+                cx: 0.5 * side as f64,
+                cy: 0.5 * side as f64,
+                camera_from_world: crate::scene::synthetic::look_at(eye, centre),
+                near: 0.5 * distance,
+                far: 2.0 * distance,
+            };
+            let lighting = crate::render::Lighting::default();
+            let full = mean_luminance(&renderer.render(&scenes[0], &camera, &lighting)?);
+            let star = mean_luminance(&renderer.render(&scenes[1], &camera, &lighting)?);
+            if let (Some(full), Some(billboard)) = (full, star) {
+                out.push(SwitchLuminance {
+                    azimuth_deg: azimuth.to_degrees(),
+                    full,
+                    billboard,
+                    difference_percent: 100.0 * (billboard - full) / full.max(1e-12),
+                });
+            }
+        }
+        Ok(Some(out))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::synth::{Preset, generate_plant, plant_model};
+
+    #[test]
+    fn billboards_are_as_bright_as_the_plants_they_replace() {
+        let mut renderer = Renderer::new().unwrap();
+        let mut differences = Vec::new();
+        for (preset, seed) in [(Preset::Broadleaf, 4), (Preset::Medium, 3)] {
+            let asset = PlantAsset::from_model(&plant_model(&generate_plant(preset, seed), 64));
+            let options = PlantLodOptions {
+                chain: ChainOptions {
+                    ratios: vec![0.1],
+                    error_samples: 300,
+                    seed: 1,
+                    ..Default::default()
+                },
+                billboard: Some(BillboardOptions::default()),
+            };
+            let lod = build_plant_lod(&asset, Some(&mut renderer), &options, "test").unwrap();
+            // A walk-through: eyes 1.7 m up, the switch some 20 m away.
+            let checks = lod
+                .switch_luminance(&mut renderer, 4.0, 8, 5.0)
+                .unwrap()
+                .unwrap();
+            assert_eq!(checks.len(), 8);
+            differences.extend(checks.iter().map(|c| c.difference_percent));
+        }
+        let mean = differences.iter().sum::<f64>() / differences.len() as f64;
+        let worst = differences.iter().fold(0.0f64, |w, d| w.max(d.abs()));
+        eprintln!("mean {mean:+.1} %, worst {worst:.1} %");
+        assert!(
+            mean.abs() < 15.0 && worst < 35.0,
+            "mean {mean:+.1} %, worst {worst:.1} %"
+        );
+    }
 
     #[test]
     fn a_lod_glb_round_trips_with_its_levels_errors_and_coverage() {
@@ -446,6 +600,10 @@ mod tests {
         for (a, b) in read.levels.iter().zip(&lod.levels) {
             assert_eq!(a.triangles, b.triangles);
             assert_eq!(a.is_billboard, b.is_billboard);
+            // The billboard's unlit material survives (KHR_materials_unlit).
+            let unlit = |l: &PlantLevel| l.parts.iter().any(|p| p.unlit);
+            assert_eq!(unlit(a), b.is_billboard);
+            assert_eq!(unlit(b), b.is_billboard);
             assert!((a.error_world - b.error_world).abs() < 1e-9);
         }
         assert!((read.radius - lod.radius).abs() < 1e-5);
@@ -480,6 +638,8 @@ mod tests {
             texture: 0,
             alpha_test: false,
             is_leaf,
+            unlit: false,
+            back_uv_offset: 0.0,
         };
         let mut level = PlantLevel {
             parts: vec![part(wood.clone(), false), part(twig.clone(), true)],

@@ -130,7 +130,15 @@ pub struct PrimitiveSpec<'a> {
     pub double_sided: bool,
     /// Cut-out transparency (`alphaMode: MASK`, cutoff ½).
     pub alpha_mask: bool,
+    /// Shown as its colour, without lighting (`KHR_materials_unlit`).
+    pub unlit: bool,
+    /// Added to u on back faces (a two-sided billboard: back tiles beside the front ones);
+    /// written to the material's extras as [`BACK_UV_OFFSET_KEY`], 0 = none.
+    pub back_uv_offset: f32,
 }
+
+/// Key of a material's back-face u offset in its `extras`.
+pub const BACK_UV_OFFSET_KEY: &str = "frond_back_uv_offset";
 
 /// Builds a glTF 2.0 binary: textures (embedded PNG), meshes of several primitives, nodes
 /// (any JSON, e.g. with extensions) and the scene's root nodes.
@@ -224,6 +232,13 @@ impl GlbBuilder {
             if primitive.alpha_mask {
                 material["alphaMode"] = json!("MASK");
                 material["alphaCutoff"] = json!(0.5);
+            }
+            if primitive.unlit {
+                material["extensions"] = json!({"KHR_materials_unlit": {}});
+                self.use_extension("KHR_materials_unlit");
+            }
+            if primitive.back_uv_offset != 0.0 {
+                material["extras"] = json!({ BACK_UV_OFFSET_KEY: primitive.back_uv_offset });
             }
             self.materials.push(material);
             written.push(json!({
@@ -351,6 +366,8 @@ pub fn write_glb_with_extras(
             },
             double_sided: node.double_sided,
             alpha_mask: false,
+            unlit: false,
+            back_uv_offset: 0.0,
         };
         let Some(mesh) = builder.add_mesh(&node.name, &[primitive]) else {
             continue;
@@ -372,6 +389,10 @@ pub struct GlbPart {
     /// Base colour factor (linear RGBA).
     pub color: [f32; 4],
     pub alpha_mask: bool,
+    /// The material is `KHR_materials_unlit`.
+    pub unlit: bool,
+    /// The material's back-face u offset (its extras' [`BACK_UV_OFFSET_KEY`]; 0 = none).
+    pub back_uv_offset: f32,
 }
 
 /// The primitives and decoded images of a glb.
@@ -551,6 +572,14 @@ fn glb_part(
             .filter(|&i| i < image_count),
         color: pbr.base_color_factor(),
         alpha_mask: material.alpha_mode() == gltf::material::AlphaMode::Mask,
+        unlit: material.unlit(),
+        back_uv_offset: material
+            .extras()
+            .as_ref()
+            .and_then(|raw| serde_json::from_str::<Value>(raw.get()).ok())
+            .and_then(|extras| extras.get(BACK_UV_OFFSET_KEY).and_then(Value::as_f64))
+            .filter(|v| v.is_finite())
+            .unwrap_or(0.0) as f32,
     })
 }
 

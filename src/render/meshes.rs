@@ -22,6 +22,9 @@ pub(super) struct GpuMesh {
     pub(super) index_count: u32,
     /// What the id pass writes for it.
     object_id: u32,
+    alpha_test: bool,
+    /// The object uniform (id, alpha test, unlit), rewritten by [`Renderer::set_shading`].
+    object_buffer: wgpu::Buffer,
     pub(super) bind_group: wgpu::BindGroup,
     /// Drawn once, untransformed, by every render (else only through instance batches).
     pub(super) is_static: bool,
@@ -83,6 +86,28 @@ fn vertex_bytes(mesh: &TriMesh) -> Vec<u8> {
 
 /// Box-filtered mip chain of an RGBA image (level 0 first).
 fn mip_chain(image: &RgbaImage) -> Vec<RgbaImage> {
+    // Averages in linear light, weighted by alpha: averaging sRGB bytes darkens, and a cut-out
+    // texture's transparent texels (black beyond the dilated border) would bleed into the
+    // colour of every coarser level, so distant foliage and billboards came out too dark.
+    let decode: Vec<f32> = (0..256)
+        .map(|v| {
+            let c = v as f32 / 255.0;
+            if c <= 0.04045 {
+                c / 12.92
+            } else {
+                ((c + 0.055) / 1.055).powf(2.4)
+            }
+        })
+        .collect();
+    let encode = |c: f32| {
+        let c = c.clamp(0.0, 1.0);
+        let s = if c <= 0.003_130_8 {
+            12.92 * c
+        } else {
+            1.055 * c.powf(1.0 / 2.4) - 0.055
+        };
+        (s * 255.0).round() as u8
+    };
     let mut levels = vec![image.clone()];
     loop {
         let last = levels.last().unwrap_or(image);
@@ -92,14 +117,30 @@ fn mip_chain(image: &RgbaImage) -> Vec<RgbaImage> {
         }
         let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
         let next = RgbaImage::from_fn(nw, nh, |x, y| {
-            let mut sum = [0u32; 4];
+            let (mut weighted, mut plain) = ([0f32; 3], [0f32; 3]);
+            let (mut alpha_sum, mut alpha_bytes) = (0f32, 0u32);
             for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
                 let px = last.get_pixel((2 * x + dx).min(w - 1), (2 * y + dy).min(h - 1));
-                for c in 0..4 {
-                    sum[c] += px[c] as u32;
+                let alpha = px[3] as f32 / 255.0;
+                for c in 0..3 {
+                    let linear = decode[px[c] as usize];
+                    weighted[c] += alpha * linear;
+                    plain[c] += 0.25 * linear;
                 }
+                alpha_sum += alpha;
+                alpha_bytes += px[3] as u32;
             }
-            image::Rgba(sum.map(|s| ((s + 2) / 4) as u8))
+            let colour = if alpha_sum > 0.0 {
+                weighted.map(|v| v / alpha_sum)
+            } else {
+                plain
+            };
+            image::Rgba([
+                encode(colour[0]),
+                encode(colour[1]),
+                encode(colour[2]),
+                ((alpha_bytes + 2) / 4) as u8,
+            ])
         });
         levels.push(next);
     }
@@ -268,16 +309,12 @@ impl Renderer {
                 message: format!("unknown texture handle {}", texture.0),
             })?;
         let buffers = self.mesh_buffers(mesh);
-        let mut uniform = Vec::with_capacity(16);
-        for v in [object_id, alpha_test as u32, 0, 0] {
-            uniform.extend_from_slice(&v.to_le_bytes());
-        }
         let object_buffer = self
             .device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("object"),
-                contents: &uniform,
-                usage: wgpu::BufferUsages::UNIFORM,
+                contents: &object_uniform(object_id, alpha_test, Shading::default()),
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             });
         let bind_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("object"),
@@ -304,6 +341,8 @@ impl Renderer {
             buffers,
             index_count: (mesh.triangles.len() * 3) as u32,
             object_id,
+            alpha_test,
+            object_buffer,
             bind_group,
             is_static,
             visible: true,
@@ -338,6 +377,27 @@ impl Renderer {
         })
     }
 
+    /// Sets how a mesh is shaded: unlit (its texture's colour as is, e.g. a billboard whose
+    /// atlas was baked under the scene's light, glTF's `KHR_materials_unlit`) or lit, and the
+    /// offset added to u on back faces (a two-sided billboard's back tiles; 0 = none).
+    pub fn set_shading(
+        &self,
+        scene: &GpuScene,
+        handle: MeshHandle,
+        shading: Shading,
+    ) -> Result<(), RenderError> {
+        let mesh = scene
+            .meshes
+            .get(handle.0)
+            .ok_or(RenderError::UnknownMesh(handle.0))?;
+        self.queue.write_buffer(
+            &mesh.object_buffer,
+            0,
+            &object_uniform(mesh.object_id, mesh.alpha_test, shading),
+        );
+        Ok(())
+    }
+
     /// Replaces the geometry of an uploaded mesh, keeping its texture, object id, alpha test
     /// and visibility: an edited part of a scene is re-uploaded without the rest (an editor
     /// changing its points or branches keeps its textured leaves on the GPU).
@@ -363,6 +423,26 @@ impl Renderer {
         slot.index_count = (mesh.triangles.len() * 3) as u32;
         Ok(())
     }
+}
+
+/// How a mesh is shaded beyond its texture (see [`Renderer::set_shading`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Shading {
+    pub unlit: bool,
+    pub back_uv_offset: f32,
+}
+
+/// The object uniform: id, alpha test, unlit, back-face u offset.
+fn object_uniform(object_id: u32, alpha_test: bool, shading: Shading) -> Vec<u8> {
+    [
+        object_id,
+        alpha_test as u32,
+        shading.unlit as u32,
+        shading.back_uv_offset.to_bits(),
+    ]
+    .iter()
+    .flat_map(|v| v.to_le_bytes())
+    .collect()
 }
 
 #[cfg(test)]

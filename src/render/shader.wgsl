@@ -15,8 +15,10 @@ struct View {
 struct Object {
     id: u32,
     alpha_test: u32,
-    _pad0: u32,
-    _pad1: u32,
+    // The texture's colour as is (a billboard baked under the scene's light).
+    unlit: u32,
+    // Added to u on back faces: a two-sided billboard's back tiles.
+    back_uv_offset: f32,
 };
 
 @group(1) @binding(0) var<uniform> object: Object;
@@ -53,11 +55,21 @@ fn vs_main(in: VertexIn) -> VertexOut {
     return out;
 }
 
+fn face_uv(uv: vec2<f32>, front: bool) -> vec2<f32> {
+    if (front) {
+        return uv;
+    }
+    return vec2<f32>(uv.x + object.back_uv_offset, uv.y);
+}
+
 @fragment
 fn fs_color(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
-    let texel = textureSample(base_color, base_sampler, in.uv);
+    let texel = textureSample(base_color, base_sampler, face_uv(in.uv, front));
     if (object.alpha_test != 0u && texel.a < 0.5) {
         discard;
+    }
+    if (object.unlit != 0u) {
+        return vec4<f32>(texel.rgb, 1.0);
     }
     var n = normalize(in.normal);
     if (!front) {
@@ -76,8 +88,8 @@ struct IdOut {
 };
 
 @fragment
-fn fs_id(in: VertexOut) -> IdOut {
-    let texel = textureSample(base_color, base_sampler, in.uv);
+fn fs_id(in: VertexOut, @builtin(front_facing) front: bool) -> IdOut {
+    let texel = textureSample(base_color, base_sampler, face_uv(in.uv, front));
     if (object.alpha_test != 0u && texel.a < 0.5) {
         discard;
     }
