@@ -173,6 +173,74 @@ impl TriMesh {
         Ok(())
     }
 
+    /// The connected pieces of a mesh (vertices that coincide count as one), each with its own
+    /// vertices; pieces keep the order of their first triangle.
+    pub fn connected_components(&self) -> Vec<TriMesh> {
+        let mesh = self;
+        let n = mesh.positions.len();
+        if n == 0 {
+            return Vec::new();
+        }
+        let scale = mesh
+            .bounds()
+            .map(|(lo, hi)| (hi - lo).norm() as f64)
+            .unwrap_or(1.0)
+            .max(1e-12);
+        let quantum = scale * 1e-6;
+        let mut sets = crate::util::union_find::UnionFind::new(n);
+        let mut first_at = std::collections::HashMap::new();
+        for (i, p) in mesh.positions.iter().enumerate() {
+            let p = p.cast::<f64>();
+            let key = (
+                (p.x / quantum).round() as i64,
+                (p.y / quantum).round() as i64,
+                (p.z / quantum).round() as i64,
+            );
+            let first = *first_at.entry(key).or_insert(i);
+            sets.union(first, i);
+        }
+        for t in &mesh.triangles {
+            sets.union(t[0] as usize, t[1] as usize);
+            sets.union(t[0] as usize, t[2] as usize);
+        }
+        let mut piece_of_root = std::collections::HashMap::new();
+        let mut pieces: Vec<(TriMesh, Vec<u32>)> = Vec::new();
+        let has_normals = mesh.normals.len() == n;
+        for t in &mesh.triangles {
+            let root = sets.find(t[0] as usize);
+            let k = *piece_of_root.entry(root).or_insert_with(|| {
+                pieces.push((TriMesh::default(), vec![u32::MAX; n]));
+                pieces.len() - 1
+            });
+            let (piece, remap) = &mut pieces[k];
+            let mut corners = [0u32; 3];
+            for (c, &v) in corners.iter_mut().zip(t) {
+                let v = v as usize;
+                if remap[v] == u32::MAX {
+                    remap[v] = piece.positions.len() as u32;
+                    piece.positions.push(mesh.positions[v]);
+                    piece
+                        .uvs
+                        .push(mesh.uvs.get(v).copied().unwrap_or([0.0, 0.0]));
+                    if has_normals {
+                        piece.normals.push(mesh.normals[v]);
+                    }
+                }
+                *c = remap[v];
+            }
+            piece.triangles.push(corners);
+        }
+        pieces
+            .into_iter()
+            .map(|(mut piece, _)| {
+                if piece.normals.len() != piece.positions.len() {
+                    piece.compute_normals();
+                }
+                piece
+            })
+            .collect()
+    }
+
     /// `count` points sampled uniformly over the surface (area-weighted), deterministic per rng.
     pub fn sample_surface(&self, count: usize, rng: &mut Rng) -> Vec<SurfaceSample> {
         let mut cumulative = Vec::with_capacity(self.triangles.len());

@@ -289,6 +289,29 @@ enum Command {
     },
     /// Measure a reconstruction's organs: `traits.csv` (long form: plant, organ_id,
     /// organ_type, trait, value, unit) and `traits.json`, written into the folder (or --out).
+    /// Approximate instancing below the plant (seed 003 on leaves): leaves clustered by shape
+    /// into a few master leaves; prints unique meshes, memory and the geometric and pixel
+    /// error against the exact leaves for each number of masters, and with --out writes the
+    /// instanced plant (nodes sharing master meshes) at the fewest masters within
+    /// --max-pixel-error.
+    Instancing {
+        /// A plant glb (`plant.glb` of a reconstruction, or any glb with leaf nodes).
+        input: PathBuf,
+        /// Numbers of masters to try.
+        #[arg(long, value_delimiter = ',', default_value = "1,2,4,8,16,32,64")]
+        masters: Vec<usize>,
+        /// Side of the square views the pixel error is measured on.
+        #[arg(long, default_value_t = 320)]
+        size: u32,
+        /// Write the instanced plant here (glb).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Pixel error allowed for --out (share of the exact leaves' pixels).
+        #[arg(long, default_value_t = 0.05)]
+        max_pixel_error: f64,
+        #[arg(long)]
+        json: bool,
+    },
     /// Pen-and-ink drawing of a plant (seed 001): branch silhouettes and cross-hatching up to
     /// second-order branches, foliage as abstract primitives outlined where the depth buffer
     /// jumps, shading zones from the light. Writes a PNG and, with --svg, the same strokes as
@@ -1715,6 +1738,77 @@ fn main() -> Result<()> {
                 auto_densify: true,
             },
         ),
+        Command::Instancing {
+            input,
+            masters,
+            size,
+            out,
+            max_pixel_error,
+            json,
+        } => {
+            use frond::lod::leaf_instancing as li;
+            if masters.is_empty() || masters.contains(&0) {
+                bail!("--masters needs positive counts, got {masters:?}");
+            }
+            if !(max_pixel_error.is_finite() && *max_pixel_error >= 0.0) {
+                bail!("--max-pixel-error must be a share >= 0, got {max_pixel_error}");
+            }
+            let plant = li::read_glb_leaves(input)
+                .with_context(|| format!("reading {}", input.display()))?;
+            if plant.leaves.is_empty() {
+                bail!(
+                    "{} has no leaves (nodes named leaf* or cut-out materials)",
+                    input.display()
+                );
+            }
+            let mut renderer = frond::render::Renderer::new().context("starting the renderer")?;
+            let curve = li::instancing_curve(
+                &mut renderer,
+                &plant.leaves,
+                &plant.up_world,
+                masters,
+                *size,
+            )
+            .context("measuring the instanced leaves")?;
+            let chosen = curve
+                .iter()
+                .filter(|row| row.pixel_error <= *max_pixel_error)
+                .min_by_key(|row| row.unique_meshes)
+                .or(curve.last());
+            if let (Some(out), Some(row)) = (out, chosen) {
+                let instancing = li::instance_leaves(&plant.leaves, row.masters_asked);
+                frond::util::atomic::write_atomic(
+                    out,
+                    &li::write_instanced_glb(&plant, &instancing),
+                )
+                .with_context(|| format!("writing {}", out.display()))?;
+                eprintln!(
+                    "{} leaves as {} masters ({:.1} % pixel error) -> {}",
+                    row.leaves,
+                    row.unique_meshes,
+                    100.0 * row.pixel_error,
+                    out.display()
+                );
+            }
+            if *json {
+                println!("{}", serde_json::to_string_pretty(&curve)?);
+            } else {
+                println!(
+                    "masters  memory  max error  median error  pixel error   (errors in median leaf lengths)"
+                );
+                for row in &curve {
+                    println!(
+                        "{:>7}  {:>5.1} %  {:>9.3}  {:>12.3}  {:>9.2} %",
+                        row.unique_meshes,
+                        100.0 * row.memory_ratio,
+                        row.max_error_leaf_lengths,
+                        row.median_error_leaf_lengths,
+                        100.0 * row.pixel_error
+                    );
+                }
+            }
+            Ok(())
+        }
         Command::Illustrate {
             input,
             scene,

@@ -118,7 +118,7 @@ impl SketchPlant {
             }
             // Merged parts (a scene's masters: all leaves of an atlas page, all branches of a
             // colour in one mesh) come apart into their connected pieces.
-            let pieces = connected_components(&part.mesh);
+            let pieces = part.mesh.connected_components();
             if part.name.starts_with("leaf") || part.alpha_mask {
                 leaves.extend(pieces);
             } else {
@@ -435,68 +435,6 @@ fn argmax(values: &[f64]) -> Option<usize> {
 }
 
 /// Vertices merged where they coincide (tube seams), and the mesh's edges between them.
-/// The connected pieces of a mesh (vertices that coincide count as one), each with its own
-/// vertices; pieces keep the order of their first triangle.
-pub fn connected_components(mesh: &TriMesh) -> Vec<TriMesh> {
-    let n = mesh.positions.len();
-    if n == 0 {
-        return Vec::new();
-    }
-    let scale = mesh
-        .bounds()
-        .map(|(lo, hi)| (hi - lo).norm() as f64)
-        .unwrap_or(1.0)
-        .max(1e-12);
-    let quantum = scale * 1e-6;
-    let mut sets = crate::util::union_find::UnionFind::new(n);
-    let mut first_at = std::collections::HashMap::new();
-    for (i, p) in mesh.positions.iter().enumerate() {
-        let key = quantize(&p.cast::<f64>(), quantum);
-        let first = *first_at.entry(key).or_insert(i);
-        sets.union(first, i);
-    }
-    for t in &mesh.triangles {
-        sets.union(t[0] as usize, t[1] as usize);
-        sets.union(t[0] as usize, t[2] as usize);
-    }
-    let mut piece_of_root = std::collections::HashMap::new();
-    let mut pieces: Vec<(TriMesh, Vec<u32>)> = Vec::new();
-    let has_normals = mesh.normals.len() == n;
-    for t in &mesh.triangles {
-        let root = sets.find(t[0] as usize);
-        let k = *piece_of_root.entry(root).or_insert_with(|| {
-            pieces.push((TriMesh::default(), vec![u32::MAX; n]));
-            pieces.len() - 1
-        });
-        let (piece, remap) = &mut pieces[k];
-        let mut corners = [0u32; 3];
-        for (c, &v) in corners.iter_mut().zip(t) {
-            let v = v as usize;
-            if remap[v] == u32::MAX {
-                remap[v] = piece.positions.len() as u32;
-                piece.positions.push(mesh.positions[v]);
-                piece
-                    .uvs
-                    .push(mesh.uvs.get(v).copied().unwrap_or([0.0, 0.0]));
-                if has_normals {
-                    piece.normals.push(mesh.normals[v]);
-                }
-            }
-            *c = remap[v];
-        }
-        piece.triangles.push(corners);
-    }
-    pieces
-        .into_iter()
-        .map(|(mut piece, _)| {
-            if piece.normals.len() != piece.positions.len() {
-                piece.compute_normals();
-            }
-            piece
-        })
-        .collect()
-}
-
 /// Neighbours of each vertex with the edge length.
 type Adjacency = Vec<Vec<(usize, f64)>>;
 
@@ -807,14 +745,14 @@ mod tests {
         merged.append(
             &GeneralizedCylinder::new(skeleton(1.0), 0.05, 0.05).mesh(&CylinderMeshing::default()),
         );
-        let pieces = connected_components(&merged);
+        let pieces = merged.connected_components();
         assert_eq!(pieces.len(), 2);
         let triangles: usize = pieces.iter().map(|p| p.triangles.len()).sum();
         assert_eq!(triangles, merged.triangles.len());
         for p in &pieces {
             p.validate().expect("valid piece");
         }
-        assert!(connected_components(&TriMesh::default()).is_empty());
+        assert!(TriMesh::default().connected_components().is_empty());
     }
 
     #[test]

@@ -7,6 +7,7 @@
 pub mod asset;
 pub mod billboard;
 pub mod chain;
+pub mod leaf_instancing;
 pub mod plant;
 pub mod select;
 pub mod simplify;
