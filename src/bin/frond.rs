@@ -169,6 +169,10 @@ enum Command {
         /// Texel height of each billboard tile (0: no billboard level).
         #[arg(long, default_value_t = 256)]
         billboard_tile: u32,
+        /// A surfel level of about this many splats before the billboard (0: none); with a
+        /// billboard, also compares both with full detail at several on-screen sizes.
+        #[arg(long, default_value_t = 0)]
+        surfels: usize,
         /// frond (half-edge collapse, better silhouettes) or meshopt (meshoptimizer, faster).
         #[arg(long, value_enum, default_value = "frond")]
         simplifier: SimplifierArg,
@@ -1430,7 +1434,7 @@ fn lod(
     out: &Path,
     threshold_px: f64,
     ratios: &[f64],
-    billboard_tile: u32,
+    (billboard_tile, surfels): (u32, usize),
     simplifier: frond::lod::chain::Simplifier,
     json: bool,
 ) -> Result<()> {
@@ -1453,6 +1457,7 @@ fn lod(
             tile_height: billboard_tile,
             ..Default::default()
         }),
+        surfels: (surfels > 0).then_some(surfels),
     };
     let mut renderer = match options.billboard {
         Some(_) => Some(frond::render::Renderer::new().context("starting the renderer")?),
@@ -1478,13 +1483,35 @@ fn lod(
             .context("measuring the billboard's brightness at its switch distance")?,
         None => None,
     };
+    // The surfel level against the billboard, both against full detail.
+    let far = match (
+        renderer.as_mut(),
+        chain.levels.iter().find(|l| l.is_billboard),
+    ) {
+        (Some(renderer), Some(billboard)) if surfels > 0 => {
+            let level = frond::lod::surfel::surfel_level(&asset, surfels, 1)
+                .context("the plant has no surface for surfels")?;
+            Some(
+                frond::lod::surfel::compare_far_levels(
+                    renderer,
+                    &asset,
+                    &level,
+                    (&billboard.parts, &chain.textures),
+                    &[12.0, 24.0, 48.0, 96.0, 192.0],
+                )
+                .context("comparing the far levels")?,
+            )
+        }
+        _ => None,
+    };
     if json {
         println!(
             "{}",
             serde_json::to_string_pretty(&serde_json::json!({
                 "input": input, "output": out, "seconds": seconds,
                 "radius_m": chain.radius, "levels": summary,
-                "billboard_switch_luminance": switch
+                "billboard_switch_luminance": switch,
+                "far_levels": far
             }))?
         );
         return Ok(());
@@ -1521,6 +1548,22 @@ fn lod(
              (worst of {} directions {worst:.1} %)",
             checks.len()
         );
+    }
+    if let Some(rows) = far {
+        println!(
+            "far levels against full detail: diameter (px)  colour difference surfels / billboard  GPU ms full / surfels / billboard"
+        );
+        for r in rows {
+            println!(
+                "{:>10.0}  {:>8.3} / {:.3}  {:>8.2} / {:.2} / {:.2}",
+                r.diameter_px,
+                r.surfel_difference,
+                r.billboard_difference,
+                r.full_ms,
+                r.surfel_ms,
+                r.billboard_ms
+            );
+        }
     }
     Ok(())
 }
@@ -1652,6 +1695,7 @@ fn main() -> Result<()> {
             threshold_px,
             ratios,
             billboard_tile,
+            surfels,
             simplifier,
             json,
         } => lod(
@@ -1659,7 +1703,7 @@ fn main() -> Result<()> {
             out,
             *threshold_px,
             ratios,
-            *billboard_tile,
+            (*billboard_tile, *surfels),
             match simplifier {
                 SimplifierArg::Frond => frond::lod::chain::Simplifier::Frond,
                 SimplifierArg::Meshopt => frond::lod::chain::Simplifier::Meshopt,

@@ -11,6 +11,7 @@ pub mod leaf_instancing;
 pub mod plant;
 pub mod select;
 pub mod simplify;
+pub mod surfel;
 
 /// Meshes shared by the LOD tests.
 #[cfg(test)]

@@ -62,6 +62,8 @@ pub struct PlantLodOptions {
     pub chain: ChainOptions,
     /// The billboard level; `None` leaves it out.
     pub billboard: Option<BillboardOptions>,
+    /// A surfel level of about this many splats before the billboard; `None` leaves it out.
+    pub surfels: Option<usize>,
 }
 
 impl Default for PlantLodOptions {
@@ -69,6 +71,7 @@ impl Default for PlantLodOptions {
         Self {
             chain: ChainOptions::default(),
             billboard: Some(BillboardOptions::default()),
+            surfels: None,
         }
     }
 }
@@ -129,6 +132,18 @@ pub fn build_plant_lod(
         prune_thin_wood(level);
     }
     let mut textures = asset.textures.clone();
+    if let Some(level) = options
+        .surfels
+        .and_then(|count| super::surfel::surfel_level(asset, count, options.chain.seed))
+    {
+        textures.push(level.palette.clone());
+        levels.push(PlantLevel {
+            triangles: level.mesh.triangles.len(),
+            parts: vec![level.part(textures.len() - 1)],
+            error_world: level.error_world,
+            is_billboard: false,
+        });
+    }
     if let (Some(renderer), Some(billboard)) = (renderer, &options.billboard) {
         let star = bake_star(renderer, asset, billboard)?;
         textures.push(star.atlas);
@@ -541,6 +556,7 @@ mod tests {
                     ..Default::default()
                 },
                 billboard: Some(BillboardOptions::default()),
+                surfels: None,
             };
             let lod = build_plant_lod(&asset, Some(&mut renderer), &options, "test").unwrap();
             // A walk-through: eyes 1.7 m up, the switch some 20 m away.
@@ -576,6 +592,7 @@ mod tests {
                 quads: 3,
                 tile_height: 64,
             }),
+            surfels: None,
         };
         let lod = build_plant_lod(&asset, Some(&mut renderer), &options, "test").unwrap();
         assert_eq!(lod.levels.len(), 4);
