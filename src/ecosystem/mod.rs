@@ -10,7 +10,6 @@
 pub mod flythrough;
 pub mod folder;
 pub mod placement;
-pub mod quantize;
 pub mod terrain;
 
 use std::path::{Path, PathBuf};
@@ -20,9 +19,9 @@ use nalgebra::{Isometry3, Point3, Similarity3, Translation3, UnitQuaternion, Vec
 use serde::{Deserialize, Serialize};
 
 use crate::lod::asset::PlantAsset;
+use crate::lod::quantize::quantize;
 use crate::util::rng::Rng;
 use placement::halftone_positions;
-use quantize::quantize;
 use terrain::{Terrain, fractal_noise, plant_up};
 
 /// Scene failures.

@@ -13,7 +13,7 @@
 use nalgebra::{Matrix3, Matrix4, Point3, Rotation3, Vector3};
 use serde::Serialize;
 
-use crate::ecosystem::quantize::quantize;
+use super::quantize::quantize;
 use crate::mesh::TriMesh;
 
 /// Stations along the main axis of the shape descriptor.

@@ -9,6 +9,7 @@ pub mod billboard;
 pub mod chain;
 pub mod leaf_instancing;
 pub mod plant;
+pub mod quantize;
 pub mod select;
 pub mod simplify;
 pub mod surfel;

@@ -1,7 +1,7 @@
-//! Approximate instancing by vector quantization (seed 003 §6): plants are described by
-//! parameter vectors, clustered by variance-minimising hyperbox splits (Wan et al.) with a
-//! per-vector importance weight, and every member of a cluster is replaced by an instance of
-//! the cluster's representative.
+//! Approximate instancing by vector quantization (seed 003 §6): plants (or leaves) are
+//! described by parameter vectors, clustered by variance-minimising hyperbox splits (Wan et
+//! al.) with a per-vector importance weight, and every member of a cluster is replaced by an
+//! instance of the cluster's representative.
 
 /// A code book: which cluster each vector fell in and each cluster's representative.
 #[derive(Clone, Debug, PartialEq)]
