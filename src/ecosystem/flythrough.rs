@@ -247,23 +247,9 @@ pub fn run_flythrough(
                 &path.display().to_string(),
             )?;
         }
-        let textures: Vec<_> = lod
-            .textures
-            .iter()
-            .enumerate()
-            .map(|(i, image)| {
-                let cutout = lod
-                    .levels
-                    .iter()
-                    .flat_map(|l| &l.parts)
-                    .any(|p| p.texture == i && p.alpha_test);
-                if cutout {
-                    renderer.add_cutout_texture(&mut gpu, image)
-                } else {
-                    renderer.add_texture(&mut gpu, image)
-                }
-            })
-            .collect();
+        let parts: Vec<_> = lod.levels.iter().flat_map(|l| &l.parts).collect();
+        let textures =
+            crate::lod::asset::upload_textures(&renderer, &mut gpu, &lod.textures, &parts);
         let mut levels = Vec::with_capacity(lod.levels.len());
         for level in &lod.levels {
             let mut handles = Vec::with_capacity(level.parts.len());

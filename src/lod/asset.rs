@@ -57,6 +57,31 @@ fn srgb_texel(linear: [f32; 4]) -> Rgba<u8> {
     ])
 }
 
+/// Uploads `textures` for drawing `parts`: a texture an unlit part uses (a baked billboard
+/// atlas) with mips averaged in linear light, one a cut-out part uses with coverage-preserving
+/// mips, any other as it is.
+pub fn upload_textures(
+    renderer: &crate::render::Renderer,
+    gpu: &mut crate::render::GpuScene,
+    textures: &[RgbaImage],
+    parts: &[&AssetPart],
+) -> Vec<crate::render::TextureHandle> {
+    textures
+        .iter()
+        .enumerate()
+        .map(|(i, image)| {
+            let users = || parts.iter().filter(|p| p.texture == i);
+            if users().any(|p| p.unlit) {
+                renderer.add_baked_cutout_texture(gpu, image)
+            } else if users().any(|p| p.alpha_test) {
+                renderer.add_cutout_texture(gpu, image)
+            } else {
+                renderer.add_texture(gpu, image)
+            }
+        })
+        .collect()
+}
+
 impl AssetPart {
     /// How the render core shades it.
     pub fn shading(&self) -> crate::render::Shading {

@@ -480,11 +480,9 @@ impl PlantLod {
         let mut scenes = Vec::new();
         for level in [0, billboard] {
             let mut gpu = renderer.new_scene();
-            let textures: Vec<_> = self
-                .textures
-                .iter()
-                .map(|t| renderer.add_cutout_texture(&mut gpu, t))
-                .collect();
+            let parts: Vec<&AssetPart> = self.levels[level].parts.iter().collect();
+            let textures =
+                super::asset::upload_textures(renderer, &mut gpu, &self.textures, &parts);
             for part in &self.levels[level].parts {
                 let Some(&texture) = textures.get(part.texture) else {
                     continue;

@@ -147,10 +147,8 @@ fn upload(
     textures: &[RgbaImage],
 ) -> Result<crate::render::GpuScene, crate::render::RenderError> {
     let mut gpu = renderer.new_scene();
-    let handles: Vec<_> = textures
-        .iter()
-        .map(|t| renderer.add_cutout_texture(&mut gpu, t))
-        .collect();
+    let users: Vec<&AssetPart> = parts.iter().collect();
+    let handles = super::asset::upload_textures(renderer, &mut gpu, textures, &users);
     for part in parts {
         let Some(&texture) = handles.get(part.texture) else {
             continue;

@@ -86,9 +86,35 @@ fn vertex_bytes(mesh: &TriMesh) -> Vec<u8> {
 
 /// Box-filtered mip chain of an RGBA image (level 0 first).
 fn mip_chain(image: &RgbaImage) -> Vec<RgbaImage> {
-    // Averages in linear light, weighted by alpha: averaging sRGB bytes darkens, and a cut-out
-    // texture's transparent texels (black beyond the dilated border) would bleed into the
-    // colour of every coarser level, so distant foliage and billboards came out too dark.
+    let mut levels = vec![image.clone()];
+    loop {
+        let last = levels.last().unwrap_or(image);
+        let (w, h) = last.dimensions();
+        if w == 1 && h == 1 {
+            break;
+        }
+        let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
+        let next = RgbaImage::from_fn(nw, nh, |x, y| {
+            let mut sum = [0u32; 4];
+            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                let px = last.get_pixel((2 * x + dx).min(w - 1), (2 * y + dy).min(h - 1));
+                for c in 0..4 {
+                    sum[c] += px[c] as u32;
+                }
+            }
+            image::Rgba(sum.map(|s| ((s + 2) / 4) as u8))
+        });
+        levels.push(next);
+    }
+    levels
+}
+
+/// Mip levels of a texture baked from renders (a billboard atlas), averaged in linear light and
+/// weighted by alpha.
+fn mip_chain_linear(image: &RgbaImage) -> Vec<RgbaImage> {
+    // Averaging sRGB bytes darkens, and transparent texels (black beyond the dilated border)
+    // would bleed into the colour of every coarser level: distant billboards came out too
+    // dark.
     let decode: Vec<f32> = (0..256)
         .map(|v| {
             let c = v as f32 / 255.0;
@@ -204,6 +230,22 @@ impl Renderer {
     /// coverage of level 0, so that foliage and billboards do not thin out with distance.
     pub fn add_cutout_texture(&self, scene: &mut GpuScene, image: &RgbaImage) -> TextureHandle {
         let mut levels = mip_chain(image);
+        let coverage = alpha_coverage(image, 1.0);
+        for level in levels.iter_mut().skip(1) {
+            preserve_alpha_coverage(level, coverage);
+        }
+        self.upload_texture(scene, levels)
+    }
+
+    /// Uploads a cut-out texture baked from renders (a billboard atlas): its mip levels are
+    /// averaged in linear light, weighted by alpha (transparent texels add no colour), and
+    /// keep the alpha-tested coverage like [`Renderer::add_cutout_texture`]'s.
+    pub fn add_baked_cutout_texture(
+        &self,
+        scene: &mut GpuScene,
+        image: &RgbaImage,
+    ) -> TextureHandle {
+        let mut levels = mip_chain_linear(image);
         let coverage = alpha_coverage(image, 1.0);
         for level in levels.iter_mut().skip(1) {
             preserve_alpha_coverage(level, coverage);
