@@ -313,6 +313,9 @@ enum Command {
         /// Pixel error allowed for --out (share of the exact leaves' pixels).
         #[arg(long, default_value_t = 0.05)]
         max_pixel_error: f64,
+        /// Instance twigs (each tube without child tubes with its leaves) instead of leaves.
+        #[arg(long)]
+        twigs: bool,
         #[arg(long)]
         json: bool,
     },
@@ -1788,6 +1791,7 @@ fn main() -> Result<()> {
             size,
             out,
             max_pixel_error,
+            twigs,
             json,
         } => {
             use frond::lod::leaf_instancing as li;
@@ -1805,29 +1809,43 @@ fn main() -> Result<()> {
                     input.display()
                 );
             }
+            let twig_list = if *twigs {
+                li::twigs(&plant)
+            } else {
+                Vec::new()
+            };
+            if *twigs && twig_list.is_empty() {
+                bail!(
+                    "{} has no twigs (tubes without child tubes that carry leaves)",
+                    input.display()
+                );
+            }
+            let items: Vec<_> = if *twigs {
+                twig_list.iter().map(|t| t.mesh(&plant)).collect()
+            } else {
+                plant.leaves.clone()
+            };
+            let what = if *twigs { "twig" } else { "leaf" };
             let mut renderer = frond::render::Renderer::new().context("starting the renderer")?;
-            let curve = li::instancing_curve(
-                &mut renderer,
-                &plant.leaves,
-                &plant.up_world,
-                masters,
-                *size,
-            )
-            .context("measuring the instanced leaves")?;
+            let curve =
+                li::instancing_curve(&mut renderer, &items, &plant.up_world, masters, *size)
+                    .with_context(|| format!("measuring the instanced {what}s"))?;
             let chosen = curve
                 .iter()
                 .filter(|row| row.pixel_error <= *max_pixel_error)
                 .min_by_key(|row| row.unique_meshes)
                 .or(curve.last());
             if let (Some(out), Some(row)) = (out, chosen) {
-                let instancing = li::instance_leaves(&plant.leaves, row.masters_asked);
-                frond::util::atomic::write_atomic(
-                    out,
-                    &li::write_instanced_glb(&plant, &instancing),
-                )
-                .with_context(|| format!("writing {}", out.display()))?;
+                let instancing = li::instance_leaves(&items, row.masters_asked);
+                let glb = if *twigs {
+                    li::write_instanced_twigs_glb(&plant, &twig_list, &instancing)
+                } else {
+                    li::write_instanced_glb(&plant, &instancing)
+                };
+                frond::util::atomic::write_atomic(out, &glb)
+                    .with_context(|| format!("writing {}", out.display()))?;
                 eprintln!(
-                    "{} leaves as {} masters ({:.1} % pixel error) -> {}",
+                    "{} {what}s as {} masters ({:.1} % pixel error) -> {}",
                     row.leaves,
                     row.unique_meshes,
                     100.0 * row.pixel_error,
@@ -1838,15 +1856,17 @@ fn main() -> Result<()> {
                 println!("{}", serde_json::to_string_pretty(&curve)?);
             } else {
                 println!(
-                    "masters  memory  max error  median error  pixel error   (errors in median leaf lengths)"
+                    "{} {what}s; masters  memory  max error  median error  pixel error   \
+                     (errors in median {what} lengths)",
+                    items.len()
                 );
                 for row in &curve {
                     println!(
                         "{:>7}  {:>5.1} %  {:>9.3}  {:>12.3}  {:>9.2} %",
                         row.unique_meshes,
                         100.0 * row.memory_ratio,
-                        row.max_error_leaf_lengths,
-                        row.median_error_leaf_lengths,
+                        row.max_error_lengths,
+                        row.median_error_lengths,
                         100.0 * row.pixel_error
                     );
                 }

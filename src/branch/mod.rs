@@ -6,7 +6,8 @@
 //! not twist or flip along curved skeletons.
 //!
 //! `handles` projects a tree into a view (a photo or the GUI's 3D camera) as the handles the
-//! user drags, and finds the handle under a press.
+//! user drags, and finds the handle under a press. `tube` recovers tubes (axis, radius, tree)
+//! from meshes alone, e.g. a glb's branch nodes.
 //!
 //! Takes spline control points, radii and parents (drawn, or found by [`skeleton`] from the
 //! non-leaf points); returns a [`BranchTree`], its meshes ([`plant`]) and the leaves attached to
@@ -17,6 +18,7 @@ pub mod handles;
 pub mod plant;
 pub mod skeleton;
 pub mod spline;
+pub mod tube;
 
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
