@@ -36,6 +36,23 @@ pub struct SurfaceSample {
     pub triangle: u32,
 }
 
+/// Welding coincident vertices: a position's cell on a fine grid (see [`TriMesh::weld`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Weld {
+    pub quantum: f64,
+}
+
+impl Weld {
+    /// The grid cell of a position: equal for positions that count as one vertex.
+    pub fn key(&self, p: &Point3<f64>) -> (i64, i64, i64) {
+        (
+            (p.x / self.quantum).round() as i64,
+            (p.y / self.quantum).round() as i64,
+            (p.z / self.quantum).round() as i64,
+        )
+    }
+}
+
 impl TriMesh {
     pub fn is_empty(&self) -> bool {
         self.triangles.is_empty()
@@ -173,6 +190,19 @@ impl TriMesh {
         Ok(())
     }
 
+    /// The grid vertices are welded on: positions within a millionth of the mesh's size are one
+    /// vertex.
+    pub fn weld(&self) -> Weld {
+        let size = self
+            .bounds()
+            .map(|(lo, hi)| (hi - lo).norm() as f64)
+            .unwrap_or(1.0)
+            .max(1e-12);
+        Weld {
+            quantum: size * 1e-6,
+        }
+    }
+
     /// The connected pieces of a mesh (vertices that coincide count as one), each with its own
     /// vertices; pieces keep the order of their first triangle.
     pub fn connected_components(&self) -> Vec<TriMesh> {
@@ -181,22 +211,11 @@ impl TriMesh {
         if n == 0 {
             return Vec::new();
         }
-        let scale = mesh
-            .bounds()
-            .map(|(lo, hi)| (hi - lo).norm() as f64)
-            .unwrap_or(1.0)
-            .max(1e-12);
-        let quantum = scale * 1e-6;
+        let weld = mesh.weld();
         let mut sets = crate::util::union_find::UnionFind::new(n);
         let mut first_at = std::collections::HashMap::new();
         for (i, p) in mesh.positions.iter().enumerate() {
-            let p = p.cast::<f64>();
-            let key = (
-                (p.x / quantum).round() as i64,
-                (p.y / quantum).round() as i64,
-                (p.z / quantum).round() as i64,
-            );
-            let first = *first_at.entry(key).or_insert(i);
+            let first = *first_at.entry(weld.key(&p.cast::<f64>())).or_insert(i);
             sets.union(first, i);
         }
         for t in &mesh.triangles {

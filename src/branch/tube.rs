@@ -94,23 +94,18 @@ pub fn tube_axis(mesh: &TriMesh) -> Option<(Vec<Point3<f64>>, Vec<f64>)> {
 
 /// Area-weighted vertex normals of the welded vertices (the mesh's winding decides outward).
 fn vertex_normals(mesh: &TriMesh, points: &[Point3<f64>]) -> Vec<Vector3<f64>> {
-    let scale = mesh
-        .bounds()
-        .map(|(lo, hi)| (hi - lo).norm() as f64)
-        .unwrap_or(1.0)
-        .max(1e-12);
-    let quantum = scale * 1e-6;
+    let weld = mesh.weld();
     let index: std::collections::HashMap<(i64, i64, i64), usize> = points
         .iter()
         .enumerate()
-        .map(|(i, p)| (quantize(p, quantum), i))
+        .map(|(i, p)| (weld.key(p), i))
         .collect();
     let mut normals = vec![Vector3::zeros(); points.len()];
     for t in &mesh.triangles {
         let corners = t.map(|v| mesh.positions[v as usize].cast::<f64>());
         let n = (corners[1] - corners[0]).cross(&(corners[2] - corners[0]));
         for c in corners {
-            if let Some(&i) = index.get(&quantize(&c, quantum)) {
+            if let Some(&i) = index.get(&weld.key(&c)) {
                 normals[i] += n;
             }
         }
@@ -119,14 +114,6 @@ fn vertex_normals(mesh: &TriMesh, points: &[Point3<f64>]) -> Vec<Vector3<f64>> {
         .into_iter()
         .map(|n| n.try_normalize(1e-300).unwrap_or_else(Vector3::zeros))
         .collect()
-}
-
-fn quantize(p: &Point3<f64>, quantum: f64) -> (i64, i64, i64) {
-    (
-        (p.x / quantum).round() as i64,
-        (p.y / quantum).round() as i64,
-        (p.z / quantum).round() as i64,
-    )
 }
 
 fn argmax(values: &[f64]) -> Option<usize> {
@@ -138,17 +125,12 @@ fn argmax(values: &[f64]) -> Option<usize> {
         .map(|(i, _)| i)
 }
 
-/// Vertices merged where they coincide (tube seams), and the mesh's edges between them.
 /// Neighbours of each vertex with the edge length.
 type Adjacency = Vec<Vec<(usize, f64)>>;
 
+/// Vertices merged where they coincide (tube seams), and the mesh's edges between them.
 fn welded_graph(mesh: &TriMesh) -> (Vec<Point3<f64>>, Adjacency) {
-    let scale = mesh
-        .bounds()
-        .map(|(lo, hi)| (hi - lo).norm() as f64)
-        .unwrap_or(1.0)
-        .max(1e-12);
-    let quantum = scale * 1e-6;
+    let weld = mesh.weld();
     let mut index = std::collections::HashMap::new();
     let mut points = Vec::new();
     let remap: Vec<usize> = mesh
@@ -156,7 +138,7 @@ fn welded_graph(mesh: &TriMesh) -> (Vec<Point3<f64>>, Adjacency) {
         .iter()
         .map(|p| {
             let p = p.cast::<f64>();
-            let key = quantize(&p, quantum);
+            let key = weld.key(&p);
             *index.entry(key).or_insert_with(|| {
                 points.push(p);
                 points.len() - 1

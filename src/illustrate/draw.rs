@@ -703,7 +703,8 @@ impl PreparedSketch {
                     let Some(branch) = branch_of(at) else {
                         continue;
                     };
-                    let shade = srgb_to_linear(color.get_pixel(x as u32, y as u32)[0]);
+                    let shade =
+                        crate::util::color::srgb_to_linear(color.get_pixel(x as u32, y as u32)[0]);
                     let dark = ((1.0 - shade - HATCH_FROM) / (1.0 - HATCH_FROM)).clamp(0.0, 1.0);
                     let g = if layer == 0 {
                         dark
@@ -756,15 +757,6 @@ impl PreparedSketch {
                 }
             }
         }
-    }
-}
-
-fn srgb_to_linear(v: u8) -> f64 {
-    let c = v as f64 / 255.0;
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
     }
 }
 

@@ -40,15 +40,7 @@ pub struct PlantAsset {
 
 /// A linear colour as an sRGB texel.
 fn srgb_texel(linear: [f32; 4]) -> Rgba<u8> {
-    let encode = |c: f32| {
-        let c = c.clamp(0.0, 1.0);
-        let s = if c <= 0.003_130_8 {
-            12.92 * c
-        } else {
-            1.055 * c.powf(1.0 / 2.4) - 0.055
-        };
-        (s * 255.0).round() as u8
-    };
+    let encode = |c: f32| crate::util::color::linear_to_srgb(c as f64);
     Rgba([
         encode(linear[0]),
         encode(linear[1]),

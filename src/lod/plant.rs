@@ -439,14 +439,7 @@ pub struct SwitchLuminance {
 /// its covered share) over the pixels whose centre is covered (the id pass: an unbiased count
 /// of the covered area).
 fn mean_luminance(out: &crate::render::RenderOutput) -> Option<f64> {
-    let decode = |v: u8| {
-        let c = v as f64 / 255.0;
-        if c <= 0.04045 {
-            c / 12.92
-        } else {
-            ((c + 0.055) / 1.055).powf(2.4)
-        }
-    };
+    let decode = crate::util::color::srgb_to_linear;
     let sum: f64 = out
         .color
         .pixels()
@@ -454,6 +447,35 @@ fn mean_luminance(out: &crate::render::RenderOutput) -> Option<f64> {
         .sum();
     let covered = out.object_id.iter().filter(|&&id| id != 0).count();
     (covered > 0).then(|| sum / covered as f64)
+}
+
+/// A square `side`-pixel view with focal length `focal` of `centre` from `distance` away, in
+/// the direction `azimuth` about +z and `elevation` above the horizon (radians).
+pub(crate) fn view_of(
+    centre: &Point3<f64>,
+    distance: f64,
+    azimuth: f64,
+    elevation: f64,
+    side: u32,
+    focal: f64,
+) -> crate::render::ViewCamera {
+    let eye = centre
+        + nalgebra::Vector3::new(
+            azimuth.cos() * elevation.cos(),
+            azimuth.sin() * elevation.cos(),
+            elevation.sin(),
+        ) * distance;
+    crate::render::ViewCamera {
+        width: side,
+        height: side,
+        fx: focal,
+        fy: focal,
+        cx: 0.5 * side as f64,
+        cy: 0.5 * side as f64,
+        camera_from_world: crate::scene::synthetic::look_at(eye, *centre),
+        near: 0.5 * distance,
+        far: 2.0 * distance,
+    }
 }
 
 impl PlantLod {
@@ -501,24 +523,14 @@ impl PlantLod {
         let mut out = Vec::with_capacity(azimuths);
         for k in 0..azimuths.max(1) {
             let azimuth = std::f64::consts::TAU * k as f64 / azimuths.max(1) as f64;
-            let elevation = elevation_deg.to_radians();
-            let eye = centre
-                + nalgebra::Vector3::new(
-                    azimuth.cos() * elevation.cos(),
-                    azimuth.sin() * elevation.cos(),
-                    elevation.sin(),
-                ) * distance;
-            let camera = crate::render::ViewCamera {
-                width: side,
-                height: side,
-                fx: focal,
-                fy: focal,
-                cx: 0.5 * side as f64,
-                cy: 0.5 * side as f64,
-                camera_from_world: crate::scene::synthetic::look_at(eye, centre),
-                near: 0.5 * distance,
-                far: 2.0 * distance,
-            };
+            let camera = view_of(
+                &centre,
+                distance,
+                azimuth,
+                elevation_deg.to_radians(),
+                side,
+                focal,
+            );
             let lighting = crate::render::Lighting::default();
             let full = mean_luminance(&renderer.render(&scenes[0], &camera, &lighting)?);
             let star = mean_luminance(&renderer.render(&scenes[1], &camera, &lighting)?);

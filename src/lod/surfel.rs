@@ -189,24 +189,8 @@ pub fn compare_far_levels(
         let mut times = [Vec::new(), Vec::new(), Vec::new()];
         for k in 0..4 {
             let azimuth = std::f64::consts::TAU * (k as f64 + 0.125) / 4.0;
-            let elevation = 5f64.to_radians();
-            let eye = centre
-                + Vector3::new(
-                    azimuth.cos() * elevation.cos(),
-                    azimuth.sin() * elevation.cos(),
-                    elevation.sin(),
-                ) * distance;
-            let camera = crate::render::ViewCamera {
-                width: side,
-                height: side,
-                fx: focal,
-                fy: focal,
-                cx: 0.5 * side as f64,
-                cy: 0.5 * side as f64,
-                camera_from_world: crate::scene::synthetic::look_at(eye, centre),
-                near: 0.5 * distance,
-                far: 2.0 * distance,
-            };
+            let camera =
+                super::plant::view_of(&centre, distance, azimuth, 5f64.to_radians(), side, focal);
             let reference = renderer.render(&full, &camera, &lighting)?;
             for (scene, sum) in [
                 (&surfel_scene, &mut surfel_difference),

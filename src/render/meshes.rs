@@ -115,25 +115,9 @@ fn mip_chain_linear(image: &RgbaImage) -> Vec<RgbaImage> {
     // Averaging sRGB bytes darkens, and transparent texels (black beyond the dilated border)
     // would bleed into the colour of every coarser level: distant billboards came out too
     // dark.
-    let decode: Vec<f32> = (0..256)
-        .map(|v| {
-            let c = v as f32 / 255.0;
-            if c <= 0.04045 {
-                c / 12.92
-            } else {
-                ((c + 0.055) / 1.055).powf(2.4)
-            }
-        })
-        .collect();
-    let encode = |c: f32| {
-        let c = c.clamp(0.0, 1.0);
-        let s = if c <= 0.003_130_8 {
-            12.92 * c
-        } else {
-            1.055 * c.powf(1.0 / 2.4) - 0.055
-        };
-        (s * 255.0).round() as u8
-    };
+    use crate::util::color::{linear_to_srgb, srgb_to_linear};
+    let decode: Vec<f32> = (0..=255u8).map(|v| srgb_to_linear(v) as f32).collect();
+    let encode = |c: f32| linear_to_srgb(c as f64);
     let mut levels = vec![image.clone()];
     loop {
         let last = levels.last().unwrap_or(image);
