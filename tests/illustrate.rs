@@ -173,6 +173,12 @@ fn svg_strokes(svg: &str) -> Vec<Vec<(f64, f64)>> {
         .collect()
 }
 
+/// A fly-around's coherence, each frame's whole raster made here.
+fn fly_coherence(frames: &[Drawing]) -> coherence::CoherenceReport {
+    let rasters: Vec<_> = frames.iter().map(|d| d.raster().unwrap()).collect();
+    coherence::coherence(frames, &rasters).unwrap()
+}
+
 fn draw(scene: &SketchScene, style: Style, hatching: Hatching, frames: usize) -> Vec<Drawing> {
     let mut options = style.options(scene.median_leaf_length());
     options.hatching = hatching;
@@ -215,9 +221,8 @@ fn hatching_on_the_bark_stays_put_in_a_slow_fly_around() {
     let dir = tempfile::tempdir().unwrap();
     let (glb, _) = plant_glb(dir.path());
     let scene = SketchScene::single(SketchPlant::from_glb(&glb).unwrap());
-    let surface =
-        coherence::coherence(&draw(&scene, Style::Detailed, Hatching::Surface, 4)).unwrap();
-    let screen = coherence::coherence(&draw(&scene, Style::Detailed, Hatching::Screen, 4)).unwrap();
+    let surface = fly_coherence(&draw(&scene, Style::Detailed, Hatching::Surface, 4));
+    let screen = fly_coherence(&draw(&scene, Style::Detailed, Hatching::Screen, 4));
     let hatching = |c: &coherence::CoherenceReport| c.by_layer["hatching"].mean_stable_ink;
     assert!(
         surface.all.mean_motion_px > 0.3,

@@ -135,12 +135,13 @@ fn sequence(frames: &[Drawing], rasters: &[GrayImage]) -> SequenceCoherence {
 }
 
 /// Coherence of consecutive frames, whole and per layer.
-pub fn coherence(frames: &[Drawing]) -> Result<CoherenceReport, super::IllustrateError> {
-    let rasters = frames
-        .iter()
-        .map(|d| d.raster_layers(None))
-        .collect::<Result<Vec<_>, _>>()?;
-    let all = sequence(frames, &rasters);
+/// `rasters` are the frames' whole drawings ([`Drawing::raster`]), which the caller has already
+/// made to write them; the per-layer rasters are made here.
+pub fn coherence(
+    frames: &[Drawing],
+    rasters: &[GrayImage],
+) -> Result<CoherenceReport, super::IllustrateError> {
+    let all = sequence(frames, rasters);
     let mut by_layer = std::collections::BTreeMap::new();
     for layer in Layer::ALL {
         if !frames

@@ -376,18 +376,15 @@ pub fn illustrate_to_files(
     let prepared = PreparedSketch::new(plant, options, first)?;
     progress.stage("drawing", views.len() as u64);
     let mut frames = Vec::with_capacity(views.len());
-    let mut kept: Vec<Drawing> = Vec::new();
+    // A fly-around keeps its frames (and their rasters) for the coherence measurement.
+    let (mut kept, mut kept_rasters) = (Vec::new(), Vec::new());
     for (k, view) in views.iter().enumerate() {
         let start = std::time::Instant::now();
         let drawing = prepared.draw(renderer, view)?;
         let raster = drawing.raster()?;
         let seconds = start.elapsed().as_secs_f64();
         let png_path = frame_path(out, k, views.len());
-        let mut png = Vec::new();
-        raster
-            .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
-            .map_err(|e| IllustrateError::Raster(e.to_string()))?;
-        write(&png_path, &png)?;
+        write(&png_path, &output::png_bytes(&raster)?)?;
         let svg_path = match (k, svg) {
             (0, Some(path)) => {
                 write(path, drawing.svg()?.as_bytes())?;
@@ -403,6 +400,7 @@ pub fn illustrate_to_files(
         });
         if views.len() > 1 {
             kept.push(drawing);
+            kept_rasters.push(raster);
         }
         progress.advance(1);
     }
@@ -421,7 +419,7 @@ pub fn illustrate_to_files(
         hatch_cell: prepared.hatch_cell,
         frames,
         coherence: if kept.len() > 1 {
-            Some(coherence::coherence(&kept)?)
+            Some(coherence::coherence(&kept, &kept_rasters)?)
         } else {
             None
         },

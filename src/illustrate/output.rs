@@ -17,6 +17,18 @@ fn cv(e: opencv::Error) -> IllustrateError {
 /// Fixed-point bits for OpenCV's sub-pixel line drawing.
 const SHIFT: i32 = 4;
 
+/// A raster drawing as PNG bytes.
+pub fn png_bytes(raster: &GrayImage) -> Result<Vec<u8>, IllustrateError> {
+    let mut bytes = Vec::new();
+    raster
+        .write_to(
+            &mut std::io::Cursor::new(&mut bytes),
+            image::ImageFormat::Png,
+        )
+        .map_err(|e| IllustrateError::Raster(e.to_string()))?;
+    Ok(bytes)
+}
+
 impl Drawing {
     /// The drawing as a grey image: 255 paper, 0 ink.
     pub fn raster(&self) -> Result<GrayImage, IllustrateError> {
@@ -73,19 +85,6 @@ impl Drawing {
         let bytes = mat.data_bytes().map_err(cv)?.to_vec();
         GrayImage::from_raw(self.width, self.height, bytes)
             .ok_or_else(|| IllustrateError::Raster("raster has the wrong size".into()))
-    }
-
-    /// The drawing as PNG bytes.
-    pub fn png(&self) -> Result<Vec<u8>, IllustrateError> {
-        let raster = self.raster()?;
-        let mut bytes = Vec::new();
-        raster
-            .write_to(
-                &mut std::io::Cursor::new(&mut bytes),
-                image::ImageFormat::Png,
-            )
-            .map_err(|e| IllustrateError::Raster(e.to_string()))?;
-        Ok(bytes)
     }
 
     /// The drawing as an SVG document: a white page, the black shadow area as paths traced

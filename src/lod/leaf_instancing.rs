@@ -400,15 +400,10 @@ pub fn write_instanced_glb(plant: &GlbLeaves, instancing: &LeafInstancing) -> Ve
         .map(|(k, &leaf)| {
             builder.add_mesh(
                 &format!("leaf_master_{k:03}"),
-                &[PrimitiveSpec {
-                    mesh: &plant.leaves[leaf],
-                    texture: plant.leaf_images[leaf].and_then(|i| textures.get(i).copied()),
-                    color: [1.0; 4],
-                    double_sided: true,
-                    alpha_mask: true,
-                    unlit: false,
-                    back_uv_offset: 0.0,
-                }],
+                &[PrimitiveSpec::leaf(
+                    &plant.leaves[leaf],
+                    plant.leaf_images[leaf].and_then(|i| textures.get(i).copied()),
+                )],
             )
         })
         .collect();
@@ -428,13 +423,14 @@ pub fn write_instanced_glb(plant: &GlbLeaves, instancing: &LeafInstancing) -> Ve
         let mesh = builder.add_mesh(
             &part.name,
             &[PrimitiveSpec {
-                mesh: &part.mesh,
-                texture: part.image.and_then(|i| textures.get(i).copied()),
-                color: part.color,
-                double_sided: false,
                 alpha_mask: part.alpha_mask,
                 unlit: part.unlit,
                 back_uv_offset: part.back_uv_offset,
+                ..PrimitiveSpec::solid(
+                    &part.mesh,
+                    part.image.and_then(|i| textures.get(i).copied()),
+                    part.color,
+                )
             }],
         );
         if let Some(mesh) = mesh {
@@ -561,24 +557,12 @@ pub fn write_instanced_twigs_glb(
             let twig = &twigs[t];
             let (wood, wood_texture, wood_color) = wood_spec(&twig.wood, twig.wood_part);
             let leaves = leaf_primitives(&twig.leaves);
-            let mut primitives = vec![PrimitiveSpec {
-                mesh: &wood,
-                texture: wood_texture,
-                color: wood_color,
-                double_sided: false,
-                alpha_mask: false,
-                unlit: false,
-                back_uv_offset: 0.0,
-            }];
-            primitives.extend(leaves.iter().map(|(mesh, texture)| PrimitiveSpec {
-                mesh,
-                texture: *texture,
-                color: [1.0; 4],
-                double_sided: true,
-                alpha_mask: true,
-                unlit: false,
-                back_uv_offset: 0.0,
-            }));
+            let mut primitives = vec![PrimitiveSpec::solid(&wood, wood_texture, wood_color)];
+            primitives.extend(
+                leaves
+                    .iter()
+                    .map(|(mesh, texture)| PrimitiveSpec::leaf(mesh, *texture)),
+            );
             builder.add_mesh(&format!("twig_master_{k:03}"), &primitives)
         })
         .collect();
@@ -606,15 +590,7 @@ pub fn write_instanced_twigs_glb(
         let texture = plant.leaf_images[i].and_then(|im| textures.get(im).copied());
         if let Some(mesh) = builder.add_mesh(
             &format!("leaf_{i:03}"),
-            &[PrimitiveSpec {
-                mesh: leaf,
-                texture,
-                color: [1.0; 4],
-                double_sided: true,
-                alpha_mask: true,
-                unlit: false,
-                back_uv_offset: 0.0,
-            }],
+            &[PrimitiveSpec::leaf(leaf, texture)],
         ) {
             let node =
                 builder.add_node(serde_json::json!({"name": format!("leaf_{i:03}"), "mesh": mesh}));
@@ -632,15 +608,7 @@ pub fn write_instanced_twigs_glb(
         let (mesh, texture, color) = wood_spec(&rest, k);
         if let Some(mesh_index) = builder.add_mesh(
             &format!("wood_{k}"),
-            &[PrimitiveSpec {
-                mesh: &mesh,
-                texture,
-                color,
-                double_sided: false,
-                alpha_mask: false,
-                unlit: false,
-                back_uv_offset: 0.0,
-            }],
+            &[PrimitiveSpec::solid(&mesh, texture, color)],
         ) {
             let node = builder
                 .add_node(serde_json::json!({"name": format!("wood_{k}"), "mesh": mesh_index}));

@@ -140,6 +140,34 @@ pub struct PrimitiveSpec<'a> {
 /// Key of a material's back-face u offset in its `extras`.
 pub const BACK_UV_OFFSET_KEY: &str = "frond_back_uv_offset";
 
+impl<'a> PrimitiveSpec<'a> {
+    /// A leaf: double-sided, cut-out, its texture's colour.
+    pub fn leaf(mesh: &'a TriMesh, texture: Option<usize>) -> Self {
+        Self {
+            mesh,
+            texture,
+            color: [1.0; 4],
+            double_sided: true,
+            alpha_mask: true,
+            unlit: false,
+            back_uv_offset: 0.0,
+        }
+    }
+
+    /// Wood and other solids: one-sided, opaque, lit.
+    pub fn solid(mesh: &'a TriMesh, texture: Option<usize>, color: [f32; 4]) -> Self {
+        Self {
+            mesh,
+            texture,
+            color,
+            double_sided: false,
+            alpha_mask: false,
+            unlit: false,
+            back_uv_offset: 0.0,
+        }
+    }
+}
+
 /// Builds a glTF 2.0 binary: textures (embedded PNG), meshes of several primitives, nodes
 /// (any JSON, e.g. with extensions) and the scene's root nodes.
 pub struct GlbBuilder {

@@ -84,8 +84,12 @@ fn vertex_bytes(mesh: &TriMesh) -> Vec<u8> {
     bytes
 }
 
-/// Box-filtered mip chain of an RGBA image (level 0 first).
-fn mip_chain(image: &RgbaImage) -> Vec<RgbaImage> {
+/// Mip chain of an RGBA image (level 0 first), each texel of a level made by `average` from
+/// the 2×2 texels under it in the level before (clamped at odd edges).
+fn downsampled_chain(
+    image: &RgbaImage,
+    average: impl Fn([image::Rgba<u8>; 4]) -> image::Rgba<u8>,
+) -> Vec<RgbaImage> {
     let mut levels = vec![image.clone()];
     loop {
         let last = levels.last().unwrap_or(image);
@@ -94,19 +98,28 @@ fn mip_chain(image: &RgbaImage) -> Vec<RgbaImage> {
             break;
         }
         let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
-        let next = RgbaImage::from_fn(nw, nh, |x, y| {
-            let mut sum = [0u32; 4];
-            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                let px = last.get_pixel((2 * x + dx).min(w - 1), (2 * y + dy).min(h - 1));
-                for c in 0..4 {
-                    sum[c] += px[c] as u32;
-                }
-            }
-            image::Rgba(sum.map(|s| ((s + 2) / 4) as u8))
-        });
+        let next =
+            RgbaImage::from_fn(nw, nh, |x, y| {
+                average([(0, 0), (1, 0), (0, 1), (1, 1)].map(|(dx, dy)| {
+                    *last.get_pixel((2 * x + dx).min(w - 1), (2 * y + dy).min(h - 1))
+                }))
+            });
         levels.push(next);
     }
     levels
+}
+
+/// Box-filtered mip chain of an RGBA image (the bytes averaged).
+fn mip_chain(image: &RgbaImage) -> Vec<RgbaImage> {
+    downsampled_chain(image, |texels| {
+        let mut sum = [0u32; 4];
+        for px in texels {
+            for c in 0..4 {
+                sum[c] += px[c] as u32;
+            }
+        }
+        image::Rgba(sum.map(|s| ((s + 2) / 4) as u8))
+    })
 }
 
 /// Mip levels of a texture baked from renders (a billboard atlas), averaged in linear light and
@@ -118,43 +131,31 @@ fn mip_chain_linear(image: &RgbaImage) -> Vec<RgbaImage> {
     use crate::util::color::{linear_to_srgb, srgb_to_linear};
     let decode: Vec<f32> = (0..=255u8).map(|v| srgb_to_linear(v) as f32).collect();
     let encode = |c: f32| linear_to_srgb(c as f64);
-    let mut levels = vec![image.clone()];
-    loop {
-        let last = levels.last().unwrap_or(image);
-        let (w, h) = last.dimensions();
-        if w == 1 && h == 1 {
-            break;
-        }
-        let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
-        let next = RgbaImage::from_fn(nw, nh, |x, y| {
-            let (mut weighted, mut plain) = ([0f32; 3], [0f32; 3]);
-            let (mut alpha_sum, mut alpha_bytes) = (0f32, 0u32);
-            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                let px = last.get_pixel((2 * x + dx).min(w - 1), (2 * y + dy).min(h - 1));
-                let alpha = px[3] as f32 / 255.0;
-                for c in 0..3 {
-                    let linear = decode[px[c] as usize];
-                    weighted[c] += alpha * linear;
-                    plain[c] += 0.25 * linear;
-                }
-                alpha_sum += alpha;
-                alpha_bytes += px[3] as u32;
+    downsampled_chain(image, |texels| {
+        let (mut weighted, mut plain) = ([0f32; 3], [0f32; 3]);
+        let (mut alpha_sum, mut alpha_bytes) = (0f32, 0u32);
+        for px in texels {
+            let alpha = px[3] as f32 / 255.0;
+            for c in 0..3 {
+                let linear = decode[px[c] as usize];
+                weighted[c] += alpha * linear;
+                plain[c] += 0.25 * linear;
             }
-            let colour = if alpha_sum > 0.0 {
-                weighted.map(|v| v / alpha_sum)
-            } else {
-                plain
-            };
-            image::Rgba([
-                encode(colour[0]),
-                encode(colour[1]),
-                encode(colour[2]),
-                ((alpha_bytes + 2) / 4) as u8,
-            ])
-        });
-        levels.push(next);
-    }
-    levels
+            alpha_sum += alpha;
+            alpha_bytes += px[3] as u32;
+        }
+        let colour = if alpha_sum > 0.0 {
+            weighted.map(|v| v / alpha_sum)
+        } else {
+            plain
+        };
+        image::Rgba([
+            encode(colour[0]),
+            encode(colour[1]),
+            encode(colour[2]),
+            ((alpha_bytes + 2) / 4) as u8,
+        ])
+    })
 }
 
 /// Bytes per instance transform.
@@ -165,6 +166,16 @@ pub(super) fn instance_bytes(transforms: &[InstanceTransform]) -> Vec<u8> {
         .iter()
         .flat_map(|m| m.iter().flat_map(|v| v.to_le_bytes()))
         .collect()
+}
+
+/// Mip levels whose alpha is rescaled so that each passes the ½ alpha test over the same share
+/// of texels as `image` (level 0).
+fn with_alpha_coverage(image: &RgbaImage, mut levels: Vec<RgbaImage>) -> Vec<RgbaImage> {
+    let coverage = alpha_coverage(image, 1.0);
+    for level in levels.iter_mut().skip(1) {
+        preserve_alpha_coverage(level, coverage);
+    }
+    levels
 }
 
 /// Fraction of texels whose alpha, scaled by `scale`, passes the ½ alpha test.
@@ -213,12 +224,7 @@ impl Renderer {
     /// Uploads a cut-out texture (alpha-tested at ½) whose mip levels keep the alpha-tested
     /// coverage of level 0, so that foliage and billboards do not thin out with distance.
     pub fn add_cutout_texture(&self, scene: &mut GpuScene, image: &RgbaImage) -> TextureHandle {
-        let mut levels = mip_chain(image);
-        let coverage = alpha_coverage(image, 1.0);
-        for level in levels.iter_mut().skip(1) {
-            preserve_alpha_coverage(level, coverage);
-        }
-        self.upload_texture(scene, levels)
+        self.upload_texture(scene, with_alpha_coverage(image, mip_chain(image)))
     }
 
     /// Uploads a cut-out texture baked from renders (a billboard atlas): its mip levels are
@@ -229,12 +235,7 @@ impl Renderer {
         scene: &mut GpuScene,
         image: &RgbaImage,
     ) -> TextureHandle {
-        let mut levels = mip_chain_linear(image);
-        let coverage = alpha_coverage(image, 1.0);
-        for level in levels.iter_mut().skip(1) {
-            preserve_alpha_coverage(level, coverage);
-        }
-        self.upload_texture(scene, levels)
+        self.upload_texture(scene, with_alpha_coverage(image, mip_chain_linear(image)))
     }
 
     fn upload_texture(&self, scene: &mut GpuScene, levels: Vec<RgbaImage>) -> TextureHandle {
