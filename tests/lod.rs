@@ -38,7 +38,15 @@ fn lod_writes_msft_lod_that_the_khronos_validator_accepts() {
     let levels = report["levels"].as_array().unwrap();
     assert_eq!(levels.len(), 5, "{report}");
     assert_eq!(levels[4]["is_billboard"], true);
-    assert_eq!(levels[4]["triangles"], 6);
+    assert_eq!(levels[4]["triangles"], 12);
+    // The billboard's brightness where it takes over is measured from 16 directions at two
+    // elevations.
+    let summary = report["billboard_switch_summary"].as_array().unwrap();
+    assert_eq!(summary.len(), 2, "{report}");
+    for s in summary {
+        assert_eq!(s["directions"], 16);
+        assert!(s["rms_percent"].as_f64().unwrap().is_finite());
+    }
 
     let (valid, text) = common::run_checker("node", "scripts/validate_gltf.js", &output);
     assert!(valid && text.contains(": 0 errors"), "validator: {text}");

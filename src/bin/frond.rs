@@ -1478,11 +1478,11 @@ fn lod(
     frond::util::atomic::write_atomic(out, &chain.to_glb(threshold_px))
         .with_context(|| format!("writing {}", out.display()))?;
     let summary = chain.summary(threshold_px);
-    // The billboard against the full plant where it takes over (8 directions, 5° above the
-    // horizon, the render core's default light).
+    // The billboard against the full plant where it takes over (16 directions, 5° and 30°
+    // above the horizon, the render core's default light).
     let switch = match renderer.as_mut() {
         Some(renderer) => chain
-            .switch_luminance(renderer, threshold_px, 8, 5.0)
+            .switch_luminance(renderer, threshold_px, 16, &[5.0, 30.0])
             .context("measuring the billboard's brightness at its switch distance")?,
         None => None,
     };
@@ -1514,6 +1514,7 @@ fn lod(
                 "input": input, "output": out, "seconds": seconds,
                 "radius_m": chain.radius, "levels": summary,
                 "billboard_switch_luminance": switch,
+                "billboard_switch_summary": switch.as_deref().map(frond::lod::plant::summarize_switch),
                 "far_levels": far
             }))?
         );
@@ -1541,16 +1542,19 @@ fn lod(
         );
     }
     if let Some(checks) = switch.filter(|c| !c.is_empty()) {
-        let mean = checks.iter().map(|c| c.difference_percent).sum::<f64>() / checks.len() as f64;
-        let worst = checks
-            .iter()
-            .map(|c| c.difference_percent.abs())
-            .fold(0.0, f64::max);
-        println!(
-            "billboard at its switch distance: {mean:+.1} % mean luminance against the full plant \
-             (worst of {} directions {worst:.1} %)",
-            checks.len()
-        );
+        println!("billboard at its switch distance against the full plant:");
+        for s in frond::lod::plant::summarize_switch(&checks) {
+            println!(
+                "  {:>4.0}° up, {} directions: luminance {:+.1} % mean, {:.1} % RMS, {:.1} % worst; \
+                 coverage {:.2}×",
+                s.elevation_deg,
+                s.directions,
+                s.mean_percent,
+                s.rms_percent,
+                s.worst_percent,
+                s.coverage_ratio
+            );
+        }
     }
     if let Some(rows) = far {
         println!(

@@ -261,7 +261,7 @@ pub fn run_flythrough(
                     1 + plant as u32,
                     part.alpha_test,
                 )?;
-                if part.unlit || part.back_uv_offset != 0.0 {
+                if part.shading != Default::default() {
                     renderer.set_shading(&gpu, handle, part.shading())?;
                 }
                 handles.push(handle);

@@ -24,11 +24,9 @@ pub struct AssetPart {
     pub alpha_test: bool,
     /// Leaves (double-sided foliage) rather than wood.
     pub is_leaf: bool,
-    /// Drawn as its texture's colour, without lighting (a billboard baked lit;
-    /// `KHR_materials_unlit` in a glb).
-    pub unlit: bool,
-    /// Added to u on back faces (a two-sided billboard's back tiles); 0 = none.
-    pub back_uv_offset: f32,
+    /// How the render core shades it beyond its texture: unlit (a billboard baked lit;
+    /// `KHR_materials_unlit` in a glb), back tiles, baked view elevations.
+    pub shading: crate::render::Shading,
 }
 
 /// A renderable plant: parts and their textures (sRGB).
@@ -49,9 +47,10 @@ fn srgb_texel(linear: [f32; 4]) -> Rgba<u8> {
     ])
 }
 
-/// Uploads `textures` for drawing `parts`: a texture an unlit part uses (a baked billboard
-/// atlas) with mips averaged in linear light, one a cut-out part uses with coverage-preserving
-/// mips, any other as it is.
+/// Uploads `textures` for drawing `parts`: a billboard atlas baked with views (drawn with
+/// partial coverage) with colour and alpha averaged in linear light, another unlit part's (an
+/// older billboard) with mips averaged in linear light and its cut-out coverage kept, one a
+/// cut-out part uses with coverage-preserving mips, any other as it is.
 pub fn upload_textures(
     renderer: &crate::render::Renderer,
     gpu: &mut crate::render::GpuScene,
@@ -63,7 +62,9 @@ pub fn upload_textures(
         .enumerate()
         .map(|(i, image)| {
             let users = || parts.iter().filter(|p| p.texture == i);
-            if users().any(|p| p.unlit) {
+            if users().any(|p| p.shading.views.is_some()) {
+                renderer.add_baked_coverage_texture(gpu, image)
+            } else if users().any(|p| p.shading.unlit) {
                 renderer.add_baked_cutout_texture(gpu, image)
             } else if users().any(|p| p.alpha_test) {
                 renderer.add_cutout_texture(gpu, image)
@@ -77,10 +78,7 @@ pub fn upload_textures(
 impl AssetPart {
     /// How the render core shades it.
     pub fn shading(&self) -> crate::render::Shading {
-        crate::render::Shading {
-            unlit: self.unlit,
-            back_uv_offset: self.back_uv_offset,
-        }
+        self.shading
     }
 }
 
@@ -103,8 +101,7 @@ impl PlantAsset {
                 texture: asset.textures.len() - 1,
                 alpha_test: true,
                 is_leaf: true,
-                unlit: false,
-                back_uv_offset: 0.0,
+                shading: Default::default(),
             });
         }
         // (colour, part index) of each branch colour seen so far.
@@ -122,8 +119,7 @@ impl PlantAsset {
                         texture: asset.textures.len() - 1,
                         alpha_test: false,
                         is_leaf: false,
-                        unlit: false,
-                        back_uv_offset: 0.0,
+                        shading: Default::default(),
                     });
                     wood.push((branch.color, asset.parts.len() - 1));
                     asset.parts.len() - 1
@@ -270,8 +266,7 @@ fn parts_from_glb(glb_parts: Vec<GlbPart>, textures: &mut Vec<RgbaImage>) -> Vec
             m.texture == texture
                 && m.alpha_test == alpha_test
                 && m.is_leaf == is_leaf
-                && m.unlit == part.unlit
-                && m.back_uv_offset == part.back_uv_offset
+                && m.shading == part.shading
         }) {
             Some(existing) => existing.mesh.append(&part.mesh),
             None => {
@@ -286,8 +281,7 @@ fn parts_from_glb(glb_parts: Vec<GlbPart>, textures: &mut Vec<RgbaImage>) -> Vec
                     texture,
                     alpha_test,
                     is_leaf,
-                    unlit: part.unlit,
-                    back_uv_offset: part.back_uv_offset,
+                    shading: part.shading,
                 });
             }
         }

@@ -424,8 +424,7 @@ pub fn write_instanced_glb(plant: &GlbLeaves, instancing: &LeafInstancing) -> Ve
             &part.name,
             &[PrimitiveSpec {
                 alpha_mask: part.alpha_mask,
-                unlit: part.unlit,
-                back_uv_offset: part.back_uv_offset,
+                shading: part.shading,
                 ..PrimitiveSpec::solid(
                     &part.mesh,
                     part.image.and_then(|i| textures.get(i).copied()),

@@ -156,9 +156,8 @@ pub fn build_plant_lod(
                 alpha_test: true,
                 is_leaf: true,
                 // The atlas is baked under the render core's default light, back tiles
-                // beside the front ones.
-                unlit: true,
-                back_uv_offset: star.back_uv_offset,
+                // beside the front ones, elevation rows below each other.
+                shading: star.shading,
             }],
             error_world: star.error_world,
             is_billboard: true,
@@ -325,8 +324,7 @@ impl PlantLod {
                     color: [1.0; 4],
                     double_sided: true,
                     alpha_mask: part.alpha_test,
-                    unlit: part.unlit,
-                    back_uv_offset: part.back_uv_offset,
+                    shading: part.shading,
                 })
                 .collect();
             let name = format!("plant_LOD{i}");
@@ -425,20 +423,70 @@ impl PlantLod {
 /// Brightness of the billboard against the full plant where one replaces the other.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct SwitchLuminance {
-    /// Azimuth of the view about the plant's up (degrees).
+    /// Azimuth of the view about the plant's up and its elevation above the horizon
+    /// (degrees).
     pub azimuth_deg: f64,
-    /// Mean linear luminance over the pixels each covers.
+    pub elevation_deg: f64,
+    /// The light each sends to the eye: linear luminance (Rec. 709) summed over the window
+    /// around the plant against a black background, brightness times coverage (a distant
+    /// plant is seen as a blob of that much light).
     pub full: f64,
     pub billboard: f64,
     /// (billboard − full) / full, percent.
     pub difference_percent: f64,
+    /// Pixels the billboard covers over pixels the plant covers (pixel centres).
+    pub coverage_ratio: f64,
 }
 
-/// Mean linear luminance (Rec. 709) of what a render covers: the luminance of every pixel
-/// summed (the background is black, so a pixel the multisampled edge only partly covers adds
-/// its covered share) over the pixels whose centre is covered (the id pass: an unbiased count
-/// of the covered area).
-fn mean_luminance(out: &crate::render::RenderOutput) -> Option<f64> {
+/// [`SwitchLuminance`]s of one view elevation summarised over the azimuths.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SwitchSummary {
+    pub elevation_deg: f64,
+    pub directions: usize,
+    /// Mean, root mean square and largest magnitude of the luminance difference (percent).
+    pub mean_percent: f64,
+    pub rms_percent: f64,
+    pub worst_percent: f64,
+    /// Mean of the billboard's coverage over the plant's.
+    pub coverage_ratio: f64,
+}
+
+/// Summarises `checks` per view elevation, in the order the elevations first appear.
+pub fn summarize_switch(checks: &[SwitchLuminance]) -> Vec<SwitchSummary> {
+    let mut elevations: Vec<f64> = Vec::new();
+    for c in checks {
+        if !elevations.contains(&c.elevation_deg) {
+            elevations.push(c.elevation_deg);
+        }
+    }
+    elevations
+        .into_iter()
+        .map(|elevation_deg| {
+            let at: Vec<&SwitchLuminance> = checks
+                .iter()
+                .filter(|c| c.elevation_deg == elevation_deg)
+                .collect();
+            let n = at.len().max(1) as f64;
+            SwitchSummary {
+                elevation_deg,
+                directions: at.len(),
+                mean_percent: at.iter().map(|c| c.difference_percent).sum::<f64>() / n,
+                rms_percent: (at.iter().map(|c| c.difference_percent.powi(2)).sum::<f64>() / n)
+                    .sqrt(),
+                worst_percent: at
+                    .iter()
+                    .map(|c| c.difference_percent.abs())
+                    .fold(0.0, f64::max),
+                coverage_ratio: at.iter().map(|c| c.coverage_ratio).sum::<f64>() / n,
+            }
+        })
+        .collect()
+}
+
+/// The light a render of one object against black sends to the eye (linear luminance,
+/// Rec. 709, summed over its pixels: a pixel the object covers in part adds its covered
+/// share) and the pixels whose centre it covers (the id pass); `None` when it covers none.
+fn light_and_coverage(out: &crate::render::RenderOutput) -> Option<(f64, usize)> {
     let decode = crate::util::color::srgb_to_linear;
     let sum: f64 = out
         .color
@@ -446,7 +494,7 @@ fn mean_luminance(out: &crate::render::RenderOutput) -> Option<f64> {
         .map(|p| 0.2126 * decode(p[0]) + 0.7152 * decode(p[1]) + 0.0722 * decode(p[2]))
         .sum();
     let covered = out.object_id.iter().filter(|&&id| id != 0).count();
-    (covered > 0).then(|| sum / covered as f64)
+    (covered > 0).then_some((sum, covered))
 }
 
 /// A square `side`-pixel view with focal length `focal` of `centre` from `distance` away, in
@@ -479,16 +527,16 @@ pub(crate) fn view_of(
 }
 
 impl PlantLod {
-    /// The full plant and its billboard rendered from `azimuths` directions `elevation_deg`
-    /// above the horizon at the billboard's switch distance on the reference viewport (λ =
-    /// `threshold_px`), under the render core's default light, as a fly-through draws them;
-    /// `None` without a billboard level.
+    /// The full plant and its billboard rendered from `azimuths` directions at each of
+    /// `elevations_deg` above the horizon, at the billboard's switch distance on the reference
+    /// viewport (λ = `threshold_px`), under the render core's default light, as a fly-through
+    /// draws them; `None` without a billboard level.
     pub fn switch_luminance(
         &self,
         renderer: &mut Renderer,
         threshold_px: f64,
         azimuths: usize,
-        elevation_deg: f64,
+        elevations_deg: &[f64],
     ) -> Result<Option<Vec<SwitchLuminance>>, RenderError> {
         let Some(billboard) = self.levels.iter().position(|l| l.is_billboard) else {
             return Ok(None);
@@ -520,27 +568,33 @@ impl PlantLod {
         let centre = self.center.cast::<f64>();
         // A window around the plant at the reference viewport's scale.
         let side = ((4.0 * self.radius as f64 * focal / distance).ceil() as u32).clamp(16, 1024);
-        let mut out = Vec::with_capacity(azimuths);
-        for k in 0..azimuths.max(1) {
-            let azimuth = std::f64::consts::TAU * k as f64 / azimuths.max(1) as f64;
-            let camera = view_of(
-                &centre,
-                distance,
-                azimuth,
-                elevation_deg.to_radians(),
-                side,
-                focal,
-            );
-            let lighting = crate::render::Lighting::default();
-            let full = mean_luminance(&renderer.render(&scenes[0], &camera, &lighting)?);
-            let star = mean_luminance(&renderer.render(&scenes[1], &camera, &lighting)?);
-            if let (Some(full), Some(billboard)) = (full, star) {
-                out.push(SwitchLuminance {
-                    azimuth_deg: azimuth.to_degrees(),
-                    full,
-                    billboard,
-                    difference_percent: 100.0 * (billboard - full) / full.max(1e-12),
-                });
+        let mut out = Vec::with_capacity(azimuths * elevations_deg.len());
+        for &elevation_deg in elevations_deg {
+            for k in 0..azimuths.max(1) {
+                let azimuth = std::f64::consts::TAU * k as f64 / azimuths.max(1) as f64;
+                let camera = view_of(
+                    &centre,
+                    distance,
+                    azimuth,
+                    elevation_deg.to_radians(),
+                    side,
+                    focal,
+                );
+                let lighting = crate::render::Lighting::default();
+                let full = light_and_coverage(&renderer.render(&scenes[0], &camera, &lighting)?);
+                let star = light_and_coverage(&renderer.render(&scenes[1], &camera, &lighting)?);
+                if let (Some((full, full_pixels)), Some((billboard, billboard_pixels))) =
+                    (full, star)
+                {
+                    out.push(SwitchLuminance {
+                        azimuth_deg: azimuth.to_degrees(),
+                        elevation_deg,
+                        full,
+                        billboard,
+                        difference_percent: 100.0 * (billboard - full) / full.max(1e-12),
+                        coverage_ratio: billboard_pixels as f64 / full_pixels as f64,
+                    });
+                }
             }
         }
         Ok(Some(out))
@@ -554,9 +608,10 @@ mod tests {
 
     #[test]
     fn billboards_are_as_bright_as_the_plants_they_replace() {
+        // Plants the billboard's design was not tuned on (those were broadleaf 4 and 7 and
+        // medium 3).
         let mut renderer = Renderer::new().unwrap();
-        let mut differences = Vec::new();
-        for (preset, seed) in [(Preset::Broadleaf, 4), (Preset::Medium, 3)] {
+        for (preset, seed) in [(Preset::Broadleaf, 11), (Preset::Medium, 12)] {
             let asset = PlantAsset::from_model(&plant_model(&generate_plant(preset, seed), 64));
             let options = PlantLodOptions {
                 chain: ChainOptions {
@@ -569,21 +624,26 @@ mod tests {
                 surfels: None,
             };
             let lod = build_plant_lod(&asset, Some(&mut renderer), &options, "test").unwrap();
-            // A walk-through: eyes 1.7 m up, the switch some 20 m away.
+            // A walk-through (eyes 1.7 m up, the switch some 20 m away), a raised view and
+            // one from above.
             let checks = lod
-                .switch_luminance(&mut renderer, 4.0, 8, 5.0)
+                .switch_luminance(&mut renderer, 4.0, 16, &[5.0, 30.0, 60.0])
                 .unwrap()
                 .unwrap();
-            assert_eq!(checks.len(), 8);
-            differences.extend(checks.iter().map(|c| c.difference_percent));
+            assert_eq!(checks.len(), 48);
+            for s in summarize_switch(&checks) {
+                eprintln!("{preset:?} {seed}: {s:?}");
+                // Measured: within 9 % mean, 10 % RMS, 23 % worst, coverage 0.91–1.04.
+                assert!(
+                    s.mean_percent.abs() < 12.0 && s.rms_percent < 15.0 && s.worst_percent < 30.0,
+                    "{preset:?} {seed}: {s:?}"
+                );
+                assert!(
+                    (0.8..1.25).contains(&s.coverage_ratio),
+                    "{preset:?} {seed}: {s:?}"
+                );
+            }
         }
-        let mean = differences.iter().sum::<f64>() / differences.len() as f64;
-        let worst = differences.iter().fold(0.0f64, |w, d| w.max(d.abs()));
-        eprintln!("mean {mean:+.1} %, worst {worst:.1} %");
-        assert!(
-            mean.abs() < 15.0 && worst < 35.0,
-            "mean {mean:+.1} %, worst {worst:.1} %"
-        );
     }
 
     #[test]
@@ -599,15 +659,15 @@ mod tests {
                 ..Default::default()
             },
             billboard: Some(BillboardOptions {
-                quads: 3,
                 tile_height: 64,
+                ..Default::default()
             }),
             surfels: None,
         };
         let lod = build_plant_lod(&asset, Some(&mut renderer), &options, "test").unwrap();
         assert_eq!(lod.levels.len(), 4);
         assert!(lod.levels.last().unwrap().is_billboard);
-        assert_eq!(lod.levels.last().unwrap().triangles, 6);
+        assert_eq!(lod.levels.last().unwrap().triangles, 12);
         for pair in lod.levels.windows(2) {
             assert!(pair[1].triangles < pair[0].triangles);
             assert!(pair[1].error_world >= pair[0].error_world);
@@ -627,10 +687,18 @@ mod tests {
         for (a, b) in read.levels.iter().zip(&lod.levels) {
             assert_eq!(a.triangles, b.triangles);
             assert_eq!(a.is_billboard, b.is_billboard);
-            // The billboard's unlit material survives (KHR_materials_unlit).
-            let unlit = |l: &PlantLevel| l.parts.iter().any(|p| p.unlit);
+            // The billboard's unlit material (KHR_materials_unlit), back tiles and baked
+            // views (the material's extras) survive.
+            let unlit = |l: &PlantLevel| l.parts.iter().any(|p| p.shading.unlit);
             assert_eq!(unlit(a), b.is_billboard);
             assert_eq!(unlit(b), b.is_billboard);
+            let shadings = |l: &PlantLevel| l.parts.iter().map(|p| p.shading).collect::<Vec<_>>();
+            assert_eq!(shadings(a), shadings(b));
+            if b.is_billboard {
+                let views = b.parts[0].shading.views.unwrap();
+                assert_eq!((views.elevation_rows, views.quads), (5, 6));
+                assert!(b.parts[0].shading.back_uv_offset > 0.0);
+            }
             assert!((a.error_world - b.error_world).abs() < 1e-9);
         }
         assert!((read.radius - lod.radius).abs() < 1e-5);
@@ -665,8 +733,7 @@ mod tests {
             texture: 0,
             alpha_test: false,
             is_leaf,
-            unlit: false,
-            back_uv_offset: 0.0,
+            shading: Default::default(),
         };
         let mut level = PlantLevel {
             parts: vec![part(wood.clone(), false), part(twig.clone(), true)],

@@ -120,8 +120,7 @@ impl SurfelLevel {
             texture,
             alpha_test: false,
             is_leaf: true,
-            unlit: false,
-            back_uv_offset: 0.0,
+            shading: Default::default(),
         }
     }
 }
@@ -290,8 +289,7 @@ mod tests {
             texture: 0,
             alpha_test: true,
             is_leaf: true,
-            unlit: true,
-            back_uv_offset: star.back_uv_offset,
+            shading: star.shading,
         };
         let rows = compare_far_levels(
             &mut renderer,

@@ -12,6 +12,7 @@ use nalgebra::{Matrix4, Point3, Vector3};
 use serde_json::{Value, json};
 
 use crate::mesh::TriMesh;
+use crate::render::{BillboardViews, Shading};
 
 /// A mesh to export, with an optional base-colour texture (an index into the textures given
 /// to [`write_glb`], so that leaves can share an atlas page).
@@ -130,15 +131,16 @@ pub struct PrimitiveSpec<'a> {
     pub double_sided: bool,
     /// Cut-out transparency (`alphaMode: MASK`, cutoff ½).
     pub alpha_mask: bool,
-    /// Shown as its colour, without lighting (`KHR_materials_unlit`).
-    pub unlit: bool,
-    /// Added to u on back faces (a two-sided billboard: back tiles beside the front ones);
-    /// written to the material's extras as [`BACK_UV_OFFSET_KEY`], 0 = none.
-    pub back_uv_offset: f32,
+    /// Unlit (`KHR_materials_unlit`), a back-face u offset and baked billboard views (the
+    /// material's extras, [`BACK_UV_OFFSET_KEY`] and [`BILLBOARD_VIEWS_KEY`]).
+    pub shading: Shading,
 }
 
 /// Key of a material's back-face u offset in its `extras`.
 pub const BACK_UV_OFFSET_KEY: &str = "frond_back_uv_offset";
+/// Key of a billboard material's baked views ([`crate::render::BillboardViews`]) in its
+/// `extras`.
+pub const BILLBOARD_VIEWS_KEY: &str = "frond_billboard_views";
 
 impl<'a> PrimitiveSpec<'a> {
     /// A leaf: double-sided, cut-out, its texture's colour.
@@ -149,8 +151,7 @@ impl<'a> PrimitiveSpec<'a> {
             color: [1.0; 4],
             double_sided: true,
             alpha_mask: true,
-            unlit: false,
-            back_uv_offset: 0.0,
+            shading: Shading::default(),
         }
     }
 
@@ -162,8 +163,7 @@ impl<'a> PrimitiveSpec<'a> {
             color,
             double_sided: false,
             alpha_mask: false,
-            unlit: false,
-            back_uv_offset: 0.0,
+            shading: Shading::default(),
         }
     }
 }
@@ -261,12 +261,16 @@ impl GlbBuilder {
                 material["alphaMode"] = json!("MASK");
                 material["alphaCutoff"] = json!(0.5);
             }
-            if primitive.unlit {
+            let shading = &primitive.shading;
+            if shading.unlit {
                 material["extensions"] = json!({"KHR_materials_unlit": {}});
                 self.use_extension("KHR_materials_unlit");
             }
-            if primitive.back_uv_offset != 0.0 {
-                material["extras"] = json!({ BACK_UV_OFFSET_KEY: primitive.back_uv_offset });
+            if shading.back_uv_offset != 0.0 {
+                material["extras"][BACK_UV_OFFSET_KEY] = json!(shading.back_uv_offset);
+            }
+            if let Some(views) = &shading.views {
+                material["extras"][BILLBOARD_VIEWS_KEY] = json!(views);
             }
             self.materials.push(material);
             written.push(json!({
@@ -394,8 +398,7 @@ pub fn write_glb_with_extras(
             },
             double_sided: node.double_sided,
             alpha_mask: false,
-            unlit: false,
-            back_uv_offset: 0.0,
+            shading: Shading::default(),
         };
         let Some(mesh) = builder.add_mesh(&node.name, &[primitive]) else {
             continue;
@@ -417,10 +420,9 @@ pub struct GlbPart {
     /// Base colour factor (linear RGBA).
     pub color: [f32; 4],
     pub alpha_mask: bool,
-    /// The material is `KHR_materials_unlit`.
-    pub unlit: bool,
-    /// The material's back-face u offset (its extras' [`BACK_UV_OFFSET_KEY`]; 0 = none).
-    pub back_uv_offset: f32,
+    /// The material's `KHR_materials_unlit`, back-face u offset and billboard views (its
+    /// extras' [`BACK_UV_OFFSET_KEY`] and [`BILLBOARD_VIEWS_KEY`]).
+    pub shading: Shading,
 }
 
 /// The primitives and decoded images of a glb.
@@ -600,15 +602,28 @@ fn glb_part(
             .filter(|&i| i < image_count),
         color: pbr.base_color_factor(),
         alpha_mask: material.alpha_mode() == gltf::material::AlphaMode::Mask,
+        shading: material_shading(&material),
+    })
+}
+
+/// A material's shading: `KHR_materials_unlit` and what its extras say (a value that is not
+/// one is ignored, as a viewer that does not know the key would).
+fn material_shading(material: &gltf::Material) -> Shading {
+    let extras = material
+        .extras()
+        .as_ref()
+        .and_then(|raw| serde_json::from_str::<Value>(raw.get()).ok());
+    let extra = |key: &str| extras.as_ref().and_then(|e| e.get(key)).cloned();
+    Shading {
         unlit: material.unlit(),
-        back_uv_offset: material
-            .extras()
-            .as_ref()
-            .and_then(|raw| serde_json::from_str::<Value>(raw.get()).ok())
-            .and_then(|extras| extras.get(BACK_UV_OFFSET_KEY).and_then(Value::as_f64))
+        back_uv_offset: extra(BACK_UV_OFFSET_KEY)
+            .and_then(|v| v.as_f64())
             .filter(|v| v.is_finite())
             .unwrap_or(0.0) as f32,
-    })
+        views: extra(BILLBOARD_VIEWS_KEY)
+            .and_then(|v| serde_json::from_value::<BillboardViews>(v).ok())
+            .filter(|v| v.elevation_step_rad.is_finite()),
+    }
 }
 
 /// Reads every triangle primitive of the default scene with its material, and decodes the

@@ -238,6 +238,18 @@ impl Renderer {
         self.upload_texture(scene, with_alpha_coverage(image, mip_chain_linear(image)))
     }
 
+    /// Uploads a baked billboard atlas drawn with baked views (see [`BillboardViews`]): its
+    /// mip levels average colour in linear light weighted by alpha, and alpha itself, so that
+    /// a texel's alpha stays the share of it the plant covers, which the colour pass draws as
+    /// that share of a pixel's samples (no rescaling for a ½ cut-off).
+    pub fn add_baked_coverage_texture(
+        &self,
+        scene: &mut GpuScene,
+        image: &RgbaImage,
+    ) -> TextureHandle {
+        self.upload_texture(scene, mip_chain_linear(image))
+    }
+
     fn upload_texture(&self, scene: &mut GpuScene, levels: Vec<RgbaImage>) -> TextureHandle {
         let (w, h) = levels.first().map_or((1, 1), |l| l.dimensions());
         let texture = self.device.create_texture(&wgpu::TextureDescriptor {
@@ -405,8 +417,9 @@ impl Renderer {
     }
 
     /// Sets how a mesh is shaded: unlit (its texture's colour as is, e.g. a billboard whose
-    /// atlas was baked under the scene's light, glTF's `KHR_materials_unlit`) or lit, and the
-    /// offset added to u on back faces (a two-sided billboard's back tiles; 0 = none).
+    /// atlas was baked under the scene's light, glTF's `KHR_materials_unlit`) or lit, the
+    /// offset added to u on back faces (a two-sided billboard's back tiles; 0 = none), and a
+    /// billboard's baked view elevations and edge-on fading.
     pub fn set_shading(
         &self,
         scene: &GpuScene,
@@ -453,19 +466,55 @@ impl Renderer {
 }
 
 /// How a mesh is shaded beyond its texture (see [`Renderer::set_shading`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Shading {
+    /// The texture's colour as is, without lighting (a billboard baked lit;
+    /// `KHR_materials_unlit` in a glb).
     pub unlit: bool,
+    /// Added to u on back faces (a two-sided billboard's back tiles beside the front ones);
+    /// 0 = none.
+    #[serde(default)]
     pub back_uv_offset: f32,
+    /// The views a billboard was baked from; `None` for ordinary geometry.
+    #[serde(default)]
+    pub views: Option<BillboardViews>,
 }
 
-/// The object uniform: id, alpha test, unlit, back-face u offset.
+/// A billboard baked from several view elevations, with quads that fade as they turn edge-on.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct BillboardViews {
+    /// Atlas rows stacked in v: row r (at v + r / rows) holds the plant as seen
+    /// `r · elevation_step_rad` above the horizon; a fragment blends the two rows nearest its
+    /// view elevation (views above the last row use the last row, views from below the first).
+    pub elevation_rows: u32,
+    pub elevation_step_rad: f32,
+    /// The star's quads, π / `quads` apart about the vertical (0 = every quad always drawn).
+    /// Quad k (its normal's azimuth − 90° = k·π / quads) is drawn where it is the nearer of
+    /// the two quads facing the viewer most (θ, the angle between its plane's normal and the
+    /// horizontal view direction, below half the spacing), and within the middle 30 % of the
+    /// spacing the two cross-dissolve by complementary dithers (even and odd k): quads seen
+    /// edge-on, which show the plant as baked from elsewhere, give way, and no pixel shows two
+    /// overlaid bakes.
+    pub quads: u32,
+}
+
+/// The object uniform: id, alpha test, unlit, back-face u offset, elevation rows and step,
+/// star quads, padding.
 fn object_uniform(object_id: u32, alpha_test: bool, shading: Shading) -> Vec<u8> {
+    let views = shading.views.unwrap_or(BillboardViews {
+        elevation_rows: 1,
+        elevation_step_rad: 0.0,
+        quads: 0,
+    });
     [
         object_id,
         alpha_test as u32,
         shading.unlit as u32,
         shading.back_uv_offset.to_bits(),
+        views.elevation_rows.max(1),
+        views.elevation_step_rad.to_bits(),
+        views.quads,
+        0,
     ]
     .iter()
     .flat_map(|v| v.to_le_bytes())

@@ -57,7 +57,8 @@ pub use depth_difference::depth_difference_cpu;
 pub use device::Renderer;
 pub use error::RenderError;
 pub use meshes::{
-    GpuScene, IDENTITY_INSTANCE, InstanceTransform, MeshHandle, Shading, TextureHandle,
+    BillboardViews, GpuScene, IDENTITY_INSTANCE, InstanceTransform, MeshHandle, Shading,
+    TextureHandle,
 };
 pub use orbit::{FIELD_OF_VIEW_DEG, Orbit};
 pub use passes::{FrameStats, InstanceBatch, Lighting};

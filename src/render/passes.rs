@@ -62,18 +62,30 @@ pub struct FrameStats {
 }
 
 impl Renderer {
-    /// The view uniforms (clip transform, camera depth row, lighting) as a bind group.
+    /// The view uniforms (clip transform, camera depth row, lighting, eye) as a bind group.
     fn view_bind_group(&self, camera: &ViewCamera, lighting: &Lighting) -> wgpu::BindGroup {
         use wgpu::util::DeviceExt;
         let clip_from_world = camera.clip_from_camera() * camera.camera_from_world.to_homogeneous();
         let camera_matrix = camera.camera_from_world.to_homogeneous();
         let light = lighting.direction_world.normalize();
-        let mut uniform: Vec<f32> = Vec::with_capacity(28);
+        let mut uniform: Vec<f32> = Vec::with_capacity(32);
         // Column-major, as WGSL expects.
         uniform.extend(clip_from_world.iter().map(|v| *v as f32));
         uniform.extend((0..4).map(|c| camera_matrix[(2, c)] as f32));
         uniform.extend([light.x as f32, light.y as f32, light.z as f32, 0.0]);
-        uniform.extend([lighting.ambient, lighting.key, lighting.fill, 0.0]);
+        uniform.extend([
+            lighting.ambient,
+            lighting.key,
+            lighting.fill,
+            self.color_samples as f32,
+        ]);
+        let eye_world = camera.camera_from_world.inverse().translation.vector;
+        uniform.extend([
+            eye_world.x as f32,
+            eye_world.y as f32,
+            eye_world.z as f32,
+            1.0,
+        ]);
         let uniform_bytes: Vec<u8> = uniform.iter().flat_map(|v| v.to_le_bytes()).collect();
         let view_buffer = self
             .device

@@ -7,7 +7,10 @@ struct View {
     // light direction toward the light, in world coordinates.
     camera_z_from_world: vec4<f32>,
     light_direction: vec4<f32>,
+    // Ambient, key and fill light; w: samples per pixel of the colour pass.
     ambient_diffuse: vec4<f32>,
+    // The camera centre in world coordinates.
+    eye_world: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> view: View;
@@ -19,6 +22,16 @@ struct Object {
     unlit: u32,
     // Added to u on back faces: a two-sided billboard's back tiles.
     back_uv_offset: f32,
+    // A billboard baked from several elevations: atlas rows stacked in v (row r at
+    // v + r / rows, seen r * elevation_step above the horizon); 1 row for anything else.
+    elevation_rows: u32,
+    elevation_step: f32,
+    // A star billboard's quads (pi / quads apart; 0: draw every quad whole). Quad k is
+    // drawn where it is the nearer of the two quads facing the viewer most (angle between its
+    // normal and the horizontal view direction), and the two cross-dissolve around halfway:
+    // even and odd quads dither with complementary thresholds, so they share the pixels.
+    star_quads: u32,
+    padding: u32,
 };
 
 @group(1) @binding(0) var<uniform> object: Object;
@@ -41,6 +54,7 @@ struct VertexOut {
     @location(0) normal: vec3<f32>,
     @location(1) uv: vec2<f32>,
     @location(2) depth: f32,
+    @location(3) world: vec3<f32>,
 };
 
 @vertex
@@ -52,6 +66,7 @@ fn vs_main(in: VertexIn) -> VertexOut {
     out.normal = (model * vec4<f32>(in.normal, 0.0)).xyz;
     out.uv = in.uv;
     out.depth = dot(view.camera_z_from_world, world);
+    out.world = world.xyz;
     return out;
 }
 
@@ -62,12 +77,105 @@ fn face_uv(uv: vec2<f32>, front: bool) -> vec2<f32> {
     return vec2<f32>(uv.x + object.back_uv_offset, uv.y);
 }
 
-@fragment
-fn fs_color(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
-    let texel = textureSample(base_color, base_sampler, face_uv(in.uv, front));
-    if (object.alpha_test != 0u && texel.a < 0.5) {
-        discard;
+// A 4x4 Bayer threshold in (0, 1) for the pixel at `pixel`.
+fn dither_threshold(pixel: vec2<f32>) -> f32 {
+    let x = u32(pixel.x) % 4u;
+    let y = u32(pixel.y) % 4u;
+    let bayer = array<f32, 16>(0.0, 8.0, 2.0, 10.0, 12.0, 4.0, 14.0, 6.0,
+                               3.0, 11.0, 1.0, 9.0, 15.0, 7.0, 13.0, 5.0);
+    return (bayer[y * 4u + x] + 0.5) / 16.0;
+}
+
+// The surface's texel: for a billboard, the two atlas rows baked nearest the view's
+// elevation blended, and alpha 0 where the quad gives way to one facing the viewer more.
+fn surface_texel(in: VertexOut, front: bool) -> vec4<f32> {
+    let uv = face_uv(in.uv, front);
+    if (object.elevation_rows <= 1u && object.star_quads == 0u) {
+        return textureSample(base_color, base_sampler, uv);
     }
+    let to_eye = normalize(view.eye_world.xyz - in.world);
+    let rows = f32(max(object.elevation_rows, 1u));
+    let elevation = asin(clamp(to_eye.z, 0.0, 1.0));
+    let row = clamp(elevation / max(object.elevation_step, 1e-6), 0.0, rows - 1.0);
+    let low = floor(row);
+    let high = min(low + 1.0, rows - 1.0);
+    let a = textureSample(base_color, base_sampler, vec2<f32>(uv.x, uv.y + low / rows));
+    let b = textureSample(base_color, base_sampler, vec2<f32>(uv.x, uv.y + high / rows));
+    var texel = mix(a, b, row - low);
+    let horizontal = to_eye.xy;
+    let normal = in.normal.xy;
+    if (object.star_quads > 0u && dot(horizontal, horizontal) > 1e-12
+        && dot(normal, normal) > 1e-12) {
+        let spacing = 3.14159265 / f32(object.star_quads);
+        let n = normalize(normal);
+        let facing = abs(dot(normalize(horizontal), n));
+        // Each pixel shows the nearer quad, except around halfway between two quads (the
+        // middle 30 % of their spacing), where they cross-dissolve by dithering.
+        let weight = smoothstep(0.35, 0.65, 1.0 - acos(min(facing, 1.0)) / spacing);
+        // The quad's index from its normal's azimuth (normal = (-sin a, cos a), a = k spacing).
+        let k = i32(round(atan2(-n.x, n.y) / spacing));
+        let q = i32(object.star_quads);
+        let odd = (((k % q) + q) % q) % 2 == 1;
+        var threshold = dither_threshold(in.clip.xy);
+        if (odd) {
+            threshold = 1.0 - threshold;
+        }
+        if (weight <= threshold) {
+            texel.a = 0.0;
+        }
+    }
+    return texel;
+}
+
+// A baked billboard (several elevations or a star of fading quads): its atlas's alpha is the
+// share of a pixel the plant covers there, drawn as that share of the pixel's samples, as
+// the plant's own sub-pixel leaves cover a share of them.
+fn is_baked_billboard() -> bool {
+    return object.elevation_rows > 1u || object.star_quads > 0u;
+}
+
+// A dither threshold that does not repeat the quads' (a shifted Bayer pattern).
+fn coverage_threshold(pixel: vec2<f32>) -> f32 {
+    return dither_threshold(pixel + vec2<f32>(2.0, 1.0));
+}
+
+// round(alpha x samples) samples (stochastically rounded by the pixel's dither) of the
+// colour pass, starting at a sample that changes from pixel to pixel.
+fn coverage_mask(alpha: f32, pixel: vec2<f32>) -> u32 {
+    let samples = clamp(u32(view.ambient_diffuse.w), 1u, 8u);
+    let n = min(u32(floor(clamp(alpha, 0.0, 1.0) * f32(samples) + coverage_threshold(pixel))),
+                samples);
+    let covered = (1u << n) - 1u;
+    let r = (u32(pixel.x) + 2u * u32(pixel.y)) % samples;
+    let all = (1u << samples) - 1u;
+    return ((covered << r) | (covered >> (samples - r))) & all;
+}
+
+struct ColorOut {
+    @location(0) color: vec4<f32>,
+    @builtin(sample_mask) mask: u32,
+};
+
+@fragment
+fn fs_color(in: VertexOut, @builtin(front_facing) front: bool) -> ColorOut {
+    let texel = surface_texel(in, front);
+    var out: ColorOut;
+    out.mask = 0xffffffffu;
+    if (object.alpha_test != 0u) {
+        if (is_baked_billboard()) {
+            out.mask = coverage_mask(texel.a, in.clip.xy);
+            if (out.mask == 0u) {
+                discard;
+            }
+        } else if (texel.a < 0.5) {
+            discard;
+        }
+    }
+    out.color = shaded(in, front, texel);
+    return out;
+}
+
+fn shaded(in: VertexOut, front: bool, texel: vec4<f32>) -> vec4<f32> {
     if (object.unlit != 0u) {
         return vec4<f32>(texel.rgb, 1.0);
     }
@@ -89,8 +197,14 @@ struct IdOut {
 
 @fragment
 fn fs_id(in: VertexOut, @builtin(front_facing) front: bool) -> IdOut {
-    let texel = textureSample(base_color, base_sampler, face_uv(in.uv, front));
-    if (object.alpha_test != 0u && texel.a < 0.5) {
+    let texel = surface_texel(in, front);
+    // One sample per pixel: a baked billboard's partial alpha covers that share of the
+    // pixels, as it covers that share of the colour pass's samples.
+    var cutoff = 0.5;
+    if (is_baked_billboard()) {
+        cutoff = max(coverage_threshold(in.clip.xy), 1e-3);
+    }
+    if (object.alpha_test != 0u && texel.a < cutoff) {
         discard;
     }
     var out: IdOut;
