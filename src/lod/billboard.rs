@@ -250,6 +250,7 @@ pub fn bake_star(
                 elevation_rows: rows as u32,
                 elevation_step_rad: step,
                 quads: quads as u32,
+                axis: [frame.axis.x, frame.axis.y],
             }),
         },
     })

@@ -496,15 +496,20 @@ pub struct BillboardViews {
     /// edge-on, which show the plant as baked from elsewhere, give way, and no pixel shows two
     /// overlaid bakes.
     pub quads: u32,
+    /// Where the quads meet: the star's vertical axis (x, y in the mesh's frame). Quads that
+    /// face a viewer on the axis more than the spacing away are not rasterized at all.
+    #[serde(default)]
+    pub axis: [f32; 2],
 }
 
 /// The object uniform: id, alpha test, unlit, back-face u offset, elevation rows and step,
-/// star quads, padding.
+/// star quads and axis, padding.
 fn object_uniform(object_id: u32, alpha_test: bool, shading: Shading) -> Vec<u8> {
     let views = shading.views.unwrap_or(BillboardViews {
         elevation_rows: 1,
         elevation_step_rad: 0.0,
         quads: 0,
+        axis: [0.0; 2],
     });
     [
         object_id,
@@ -514,6 +519,10 @@ fn object_uniform(object_id: u32, alpha_test: bool, shading: Shading) -> Vec<u8>
         views.elevation_rows.max(1),
         views.elevation_step_rad.to_bits(),
         views.quads,
+        views.axis[0].to_bits(),
+        views.axis[1].to_bits(),
+        0,
+        0,
         0,
     ]
     .iter()

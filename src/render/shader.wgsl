@@ -31,7 +31,12 @@ struct Object {
     // normal and the horizontal view direction), and the two cross-dissolve around halfway:
     // even and odd quads dither with complementary thresholds, so they share the pixels.
     star_quads: u32,
-    padding: u32,
+    // The star's vertical axis (x, y in the mesh's frame).
+    star_axis_x: f32,
+    star_axis_y: f32,
+    padding_0: u32,
+    padding_1: u32,
+    padding_2: u32,
 };
 
 @group(1) @binding(0) var<uniform> object: Object;
@@ -67,6 +72,20 @@ fn vs_main(in: VertexIn) -> VertexOut {
     out.uv = in.uv;
     out.depth = dot(view.camera_z_from_world, world);
     out.world = world.xyz;
+    // A star billboard's quad more than the quads' spacing from facing a viewer on its axis
+    // gives way in every fragment (the fragment stage drops it from 0.65 spacing on): its
+    // corners collapse outside the view, so it is not rasterized.
+    if (object.star_quads > 0u) {
+        let axis = model * vec4<f32>(object.star_axis_x, object.star_axis_y, in.position.z, 1.0);
+        let horizontal = view.eye_world.xy - axis.xy;
+        let normal = out.normal.xy;
+        if (dot(horizontal, horizontal) > 1e-12 && dot(normal, normal) > 1e-12) {
+            let facing = abs(dot(normalize(horizontal), normalize(normal)));
+            if (acos(min(facing, 1.0)) > 3.14159265 / f32(object.star_quads)) {
+                out.clip = vec4<f32>(2.0, 2.0, 2.0, 1.0);
+            }
+        }
+    }
     return out;
 }
 
@@ -93,15 +112,11 @@ fn surface_texel(in: VertexOut, front: bool) -> vec4<f32> {
     if (object.elevation_rows <= 1u && object.star_quads == 0u) {
         return textureSample(base_color, base_sampler, uv);
     }
+    // Gradients taken before any branch that depends on the fragment, so that a quad that
+    // gives way skips its texture lookups (textureSampleGrad needs no uniform control flow).
+    let uv_dx = dpdx(uv);
+    let uv_dy = dpdy(uv);
     let to_eye = normalize(view.eye_world.xyz - in.world);
-    let rows = f32(max(object.elevation_rows, 1u));
-    let elevation = asin(clamp(to_eye.z, 0.0, 1.0));
-    let row = clamp(elevation / max(object.elevation_step, 1e-6), 0.0, rows - 1.0);
-    let low = floor(row);
-    let high = min(low + 1.0, rows - 1.0);
-    let a = textureSample(base_color, base_sampler, vec2<f32>(uv.x, uv.y + low / rows));
-    let b = textureSample(base_color, base_sampler, vec2<f32>(uv.x, uv.y + high / rows));
-    var texel = mix(a, b, row - low);
     let horizontal = to_eye.xy;
     let normal = in.normal.xy;
     if (object.star_quads > 0u && dot(horizontal, horizontal) > 1e-12
@@ -121,10 +136,19 @@ fn surface_texel(in: VertexOut, front: bool) -> vec4<f32> {
             threshold = 1.0 - threshold;
         }
         if (weight <= threshold) {
-            texel.a = 0.0;
+            return vec4<f32>(0.0);
         }
     }
-    return texel;
+    let rows = f32(max(object.elevation_rows, 1u));
+    let elevation = asin(clamp(to_eye.z, 0.0, 1.0));
+    let row = clamp(elevation / max(object.elevation_step, 1e-6), 0.0, rows - 1.0);
+    let low = floor(row);
+    let high = min(low + 1.0, rows - 1.0);
+    let a = textureSampleGrad(base_color, base_sampler, vec2<f32>(uv.x, uv.y + low / rows),
+                              uv_dx, uv_dy);
+    let b = textureSampleGrad(base_color, base_sampler, vec2<f32>(uv.x, uv.y + high / rows),
+                              uv_dx, uv_dy);
+    return mix(a, b, row - low);
 }
 
 // A baked billboard (several elevations or a star of fading quads): its atlas's alpha is the
