@@ -117,12 +117,10 @@ pub fn bake_star(
     let tile_width =
         ((tile_height as f32 * 2.0 * frame.reach / height).round() as u32).clamp(8, 4096);
     let mut gpu = renderer.new_scene();
+    let parts: Vec<&super::asset::AssetPart> = asset.parts.iter().collect();
+    let textures = super::asset::upload_textures(renderer, &mut gpu, &asset.textures, &parts);
     for part in &asset.parts {
-        let texture = if part.alpha_test {
-            renderer.add_cutout_texture(&mut gpu, &asset.textures[part.texture])
-        } else {
-            renderer.add_texture(&mut gpu, &asset.textures[part.texture])
-        };
+        let texture = textures[part.texture];
         let handle = renderer.add_mesh(&mut gpu, &part.mesh, texture, 1, part.alpha_test)?;
         renderer.set_shading(&gpu, handle, part.shading())?;
     }
@@ -252,6 +250,7 @@ pub fn bake_star(
                 quads: quads as u32,
                 axis: [frame.axis.x, frame.axis.y],
             }),
+            alpha_coverage: true,
         },
     })
 }
@@ -331,13 +330,17 @@ mod tests {
         let mut gpu = renderer.new_scene();
         for (mesh, texture, cutout) in meshes {
             let t = if shading.views.is_some() {
-                renderer.add_baked_coverage_texture(&mut gpu, texture)
+                renderer.add_coverage_texture(&mut gpu, texture)
             } else if *cutout {
                 renderer.add_cutout_texture(&mut gpu, texture)
             } else {
                 renderer.add_texture(&mut gpu, texture)
             };
             let handle = renderer.add_mesh(&mut gpu, mesh, t, 1, *cutout).unwrap();
+            let shading = Shading {
+                alpha_coverage: shading.views.is_some(),
+                ..shading
+            };
             renderer.set_shading(&gpu, handle, shading).unwrap();
         }
         let out = renderer.render(&gpu, camera, &Lighting::default()).unwrap();

@@ -138,6 +138,8 @@ pub struct PrimitiveSpec<'a> {
 
 /// Key of a material's back-face u offset in its `extras`.
 pub const BACK_UV_OFFSET_KEY: &str = "frond_back_uv_offset";
+/// Key of a material's alpha-as-coverage flag ([`Shading::alpha_coverage`]) in its `extras`.
+pub const ALPHA_COVERAGE_KEY: &str = "frond_alpha_coverage";
 /// Key of a billboard material's baked views ([`crate::render::BillboardViews`]) in its
 /// `extras`.
 pub const BILLBOARD_VIEWS_KEY: &str = "frond_billboard_views";
@@ -271,6 +273,9 @@ impl GlbBuilder {
             }
             if let Some(views) = &shading.views {
                 material["extras"][BILLBOARD_VIEWS_KEY] = json!(views);
+            }
+            if shading.alpha_coverage {
+                material["extras"][ALPHA_COVERAGE_KEY] = json!(true);
             }
             self.materials.push(material);
             written.push(json!({
@@ -623,6 +628,9 @@ fn material_shading(material: &gltf::Material) -> Shading {
         views: extra(BILLBOARD_VIEWS_KEY)
             .and_then(|v| serde_json::from_value::<BillboardViews>(v).ok())
             .filter(|v| v.elevation_step_rad.is_finite()),
+        alpha_coverage: extra(ALPHA_COVERAGE_KEY)
+            .and_then(|v| v.as_bool())
+            .unwrap_or(false),
     }
 }
 

@@ -238,15 +238,11 @@ impl Renderer {
         self.upload_texture(scene, with_alpha_coverage(image, mip_chain_linear(image)))
     }
 
-    /// Uploads a baked billboard atlas drawn with baked views (see [`BillboardViews`]): its
-    /// mip levels average colour in linear light weighted by alpha, and alpha itself, so that
-    /// a texel's alpha stays the share of it the plant covers, which the colour pass draws as
-    /// that share of a pixel's samples (no rescaling for a ½ cut-off).
-    pub fn add_baked_coverage_texture(
-        &self,
-        scene: &mut GpuScene,
-        image: &RgbaImage,
-    ) -> TextureHandle {
+    /// Uploads a cut-out texture drawn with alpha as coverage ([`Shading::alpha_coverage`]):
+    /// its mip levels average colour in linear light weighted by alpha, and alpha itself, so
+    /// that a texel's alpha stays the share of it the surface covers (no rescaling for a ½
+    /// cut-off).
+    pub fn add_coverage_texture(&self, scene: &mut GpuScene, image: &RgbaImage) -> TextureHandle {
         self.upload_texture(scene, mip_chain_linear(image))
     }
 
@@ -478,6 +474,13 @@ pub struct Shading {
     /// The views a billboard was baked from; `None` for ordinary geometry.
     #[serde(default)]
     pub views: Option<BillboardViews>,
+    /// A cut-out's alpha is the share of a texel the surface covers: the colour pass covers
+    /// that share of a pixel's samples and the id pass that share of the pixels (dithered),
+    /// instead of all or nothing at ½, so that foliage seen small keeps its light (leaves
+    /// thinner than a pixel, a billboard's mips). For textures uploaded with
+    /// [`Renderer::add_coverage_texture`].
+    #[serde(default)]
+    pub alpha_coverage: bool,
 }
 
 /// A billboard baked from several view elevations, with quads that fade as they turn edge-on.
@@ -503,7 +506,7 @@ pub struct BillboardViews {
 }
 
 /// The object uniform: id, alpha test, unlit, back-face u offset, elevation rows and step,
-/// star quads and axis, padding.
+/// star quads and axis, alpha as coverage, padding.
 fn object_uniform(object_id: u32, alpha_test: bool, shading: Shading) -> Vec<u8> {
     let views = shading.views.unwrap_or(BillboardViews {
         elevation_rows: 1,
@@ -521,7 +524,7 @@ fn object_uniform(object_id: u32, alpha_test: bool, shading: Shading) -> Vec<u8>
         views.quads,
         views.axis[0].to_bits(),
         views.axis[1].to_bits(),
-        0,
+        shading.alpha_coverage as u32,
         0,
         0,
     ]

@@ -34,7 +34,9 @@ struct Object {
     // The star's vertical axis (x, y in the mesh's frame).
     star_axis_x: f32,
     star_axis_y: f32,
-    padding_0: u32,
+    // A cut-out's alpha is the share of the pixel covered (samples in the colour pass,
+    // dithered pixels in the id pass) rather than all or nothing at 0.5.
+    alpha_coverage: u32,
     padding_1: u32,
     padding_2: u32,
 };
@@ -60,6 +62,9 @@ struct VertexOut {
     @location(1) uv: vec2<f32>,
     @location(2) depth: f32,
     @location(3) world: vec3<f32>,
+    // A star billboard's quad index parity (its normal's azimuth in the mesh's frame, so
+    // that a rotated instance keeps it).
+    @location(4) @interpolate(flat) quad_odd: u32,
 };
 
 @vertex
@@ -72,16 +77,22 @@ fn vs_main(in: VertexIn) -> VertexOut {
     out.uv = in.uv;
     out.depth = dot(view.camera_z_from_world, world);
     out.world = world.xyz;
+    out.quad_odd = 0u;
     // A star billboard's quad more than the quads' spacing from facing a viewer on its axis
     // gives way in every fragment (the fragment stage drops it from 0.65 spacing on): its
     // corners collapse outside the view, so it is not rasterized.
-    if (object.star_quads > 0u) {
+    if (object.star_quads > 0u && dot(in.normal.xy, in.normal.xy) > 1e-12) {
+        // Quad k's normal is (-sin a, cos a), a = k pi / quads.
+        let spacing = 3.14159265 / f32(object.star_quads);
+        let k = i32(round(atan2(-in.normal.x, in.normal.y) / spacing));
+        let q = i32(object.star_quads);
+        out.quad_odd = u32((((k % q) + q) % q) % 2);
         let axis = model * vec4<f32>(object.star_axis_x, object.star_axis_y, in.position.z, 1.0);
         let horizontal = view.eye_world.xy - axis.xy;
         let normal = out.normal.xy;
         if (dot(horizontal, horizontal) > 1e-12 && dot(normal, normal) > 1e-12) {
             let facing = abs(dot(normalize(horizontal), normalize(normal)));
-            if (acos(min(facing, 1.0)) > 3.14159265 / f32(object.star_quads)) {
+            if (acos(min(facing, 1.0)) > spacing) {
                 out.clip = vec4<f32>(2.0, 2.0, 2.0, 1.0);
             }
         }
@@ -110,6 +121,14 @@ fn dither_threshold(pixel: vec2<f32>) -> f32 {
 fn surface_texel(in: VertexOut, front: bool) -> vec4<f32> {
     let uv = face_uv(in.uv, front);
     if (object.elevation_rows <= 1u && object.star_quads == 0u) {
+        if (object.alpha_coverage != 0u) {
+            // The mip level of the footprint's shorter side: a leaf seen nearly edge-on keeps
+            // the alpha of its own texels instead of one averaged over its long side with
+            // the transparent texels around it (which thinned distant foliage).
+            let size = vec2<f32>(textureDimensions(base_color));
+            let shorter = min(length(dpdx(uv) * size), length(dpdy(uv) * size));
+            return textureSampleLevel(base_color, base_sampler, uv, log2(max(shorter, 1e-6)));
+        }
         return textureSample(base_color, base_sampler, uv);
     }
     // Gradients taken before any branch that depends on the fragment, so that a quad that
@@ -127,12 +146,8 @@ fn surface_texel(in: VertexOut, front: bool) -> vec4<f32> {
         // Each pixel shows the nearer quad, except around halfway between two quads (the
         // middle 30 % of their spacing), where they cross-dissolve by dithering.
         let weight = smoothstep(0.35, 0.65, 1.0 - acos(min(facing, 1.0)) / spacing);
-        // The quad's index from its normal's azimuth (normal = (-sin a, cos a), a = k spacing).
-        let k = i32(round(atan2(-n.x, n.y) / spacing));
-        let q = i32(object.star_quads);
-        let odd = (((k % q) + q) % q) % 2 == 1;
         var threshold = dither_threshold(in.clip.xy);
-        if (odd) {
+        if (in.quad_odd == 1u) {
             threshold = 1.0 - threshold;
         }
         if (weight <= threshold) {
@@ -151,11 +166,10 @@ fn surface_texel(in: VertexOut, front: bool) -> vec4<f32> {
     return mix(a, b, row - low);
 }
 
-// A baked billboard (several elevations or a star of fading quads): its atlas's alpha is the
-// share of a pixel the plant covers there, drawn as that share of the pixel's samples, as
-// the plant's own sub-pixel leaves cover a share of them.
-fn is_baked_billboard() -> bool {
-    return object.elevation_rows > 1u || object.star_quads > 0u;
+// Alpha is the share of a pixel the surface covers there, drawn as that share of the
+// pixel's samples (a billboard's mips; leaves thinner than a pixel).
+fn uses_alpha_coverage() -> bool {
+    return object.alpha_coverage != 0u;
 }
 
 // A dither threshold that does not repeat the quads' (a shifted Bayer pattern).
@@ -186,7 +200,7 @@ fn fs_color(in: VertexOut, @builtin(front_facing) front: bool) -> ColorOut {
     var out: ColorOut;
     out.mask = 0xffffffffu;
     if (object.alpha_test != 0u) {
-        if (is_baked_billboard()) {
+        if (uses_alpha_coverage()) {
             out.mask = coverage_mask(texel.a, in.clip.xy);
             if (out.mask == 0u) {
                 discard;
@@ -222,10 +236,10 @@ struct IdOut {
 @fragment
 fn fs_id(in: VertexOut, @builtin(front_facing) front: bool) -> IdOut {
     let texel = surface_texel(in, front);
-    // One sample per pixel: a baked billboard's partial alpha covers that share of the
+    // One sample per pixel: a partial alpha drawn as coverage covers that share of the
     // pixels, as it covers that share of the colour pass's samples.
     var cutoff = 0.5;
-    if (is_baked_billboard()) {
+    if (uses_alpha_coverage()) {
         cutoff = max(coverage_threshold(in.clip.xy), 1e-3);
     }
     if (object.alpha_test != 0u && texel.a < cutoff) {
