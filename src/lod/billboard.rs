@@ -249,6 +249,7 @@ pub fn bake_star(
                 elevation_step_rad: step,
                 quads: quads as u32,
                 axis: [frame.axis.x, frame.axis.y],
+                plant_z: [frame.z_range.0, frame.z_range.1],
             }),
             alpha_coverage: true,
         },

@@ -503,16 +503,22 @@ pub struct BillboardViews {
     /// face a viewer on the axis more than the spacing away are not rasterized at all.
     #[serde(default)]
     pub axis: [f32; 2],
+    /// The plant's height range (z in the mesh's frame); the quads reach above and below it
+    /// by as much as the highest baked elevation needs, and a vertex stage trims them to what
+    /// the view's elevation needs (less to rasterize). Equal values: no trimming.
+    #[serde(default)]
+    pub plant_z: [f32; 2],
 }
 
 /// The object uniform: id, alpha test, unlit, back-face u offset, elevation rows and step,
-/// star quads and axis, alpha as coverage, padding.
+/// star quads and axis, alpha as coverage, the plant's height range.
 fn object_uniform(object_id: u32, alpha_test: bool, shading: Shading) -> Vec<u8> {
     let views = shading.views.unwrap_or(BillboardViews {
         elevation_rows: 1,
         elevation_step_rad: 0.0,
         quads: 0,
         axis: [0.0; 2],
+        plant_z: [0.0; 2],
     });
     [
         object_id,
@@ -525,8 +531,8 @@ fn object_uniform(object_id: u32, alpha_test: bool, shading: Shading) -> Vec<u8>
         views.axis[0].to_bits(),
         views.axis[1].to_bits(),
         shading.alpha_coverage as u32,
-        0,
-        0,
+        views.plant_z[0].to_bits(),
+        views.plant_z[1].to_bits(),
     ]
     .iter()
     .flat_map(|v| v.to_le_bytes())

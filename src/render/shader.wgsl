@@ -37,8 +37,10 @@ struct Object {
     // A cut-out's alpha is the share of the pixel covered (samples in the colour pass,
     // dithered pixels in the id pass) rather than all or nothing at 0.5.
     alpha_coverage: u32,
-    padding_1: u32,
-    padding_2: u32,
+    // A billboard's plant height range (mesh frame); its quads reach beyond it by what the
+    // highest baked elevation needs. Equal: no trimming.
+    plant_z_lo: f32,
+    plant_z_hi: f32,
 };
 
 @group(1) @binding(0) var<uniform> object: Object;
@@ -71,10 +73,36 @@ struct VertexOut {
 fn vs_main(in: VertexIn) -> VertexOut {
     var out: VertexOut;
     let model = mat4x4<f32>(in.model_0, in.model_1, in.model_2, in.model_3);
-    let world = model * vec4<f32>(in.position, 1.0);
+    var position = in.position;
+    var uv = in.uv;
+    // A billboard's quad reaches `overhang` above and below the plant for the highest baked
+    // elevation; a lower view needs less of it (with two row steps to spare for the row
+    // blend and the view's spread over the plant), so the corner moves in and v with it
+    // (v grows downwards by 1 / rows over the quad's height).
+    let rows = object.elevation_rows;
+    let lo = object.plant_z_lo;
+    let hi = object.plant_z_hi;
+    if (rows > 1u && hi > lo) {
+        let top = position.z > hi;
+        let overhang = select(lo - position.z, position.z - hi, top);
+        let highest = object.elevation_step * f32(rows - 1u);
+        if (overhang > 0.0 && highest > 0.0) {
+            let centre = model * vec4<f32>(object.star_axis_x, object.star_axis_y,
+                                           0.5 * (lo + hi), 1.0);
+            let to_eye = normalize(view.eye_world.xyz - centre.xyz);
+            let elevation = asin(clamp(abs(to_eye.z), 0.0, 1.0));
+            let needed_elevation = min(elevation + 2.0 * object.elevation_step, highest);
+            let needed = overhang * tan(needed_elevation) / tan(highest);
+            let z = select(lo - needed, hi + needed, top);
+            let quad_height = (hi - lo) + 2.0 * overhang;
+            uv.y = uv.y + (position.z - z) / (f32(rows) * quad_height);
+            position.z = z;
+        }
+    }
+    let world = model * vec4<f32>(position, 1.0);
     out.clip = view.clip_from_world * world;
     out.normal = (model * vec4<f32>(in.normal, 0.0)).xyz;
-    out.uv = in.uv;
+    out.uv = uv;
     out.depth = dot(view.camera_z_from_world, world);
     out.world = world.xyz;
     out.quad_odd = 0u;
