@@ -131,8 +131,9 @@ pub struct PrimitiveSpec<'a> {
     pub double_sided: bool,
     /// Cut-out transparency (`alphaMode: MASK`, cutoff ½).
     pub alpha_mask: bool,
-    /// Unlit (`KHR_materials_unlit`), a back-face u offset and baked billboard views (the
-    /// material's extras, [`BACK_UV_OFFSET_KEY`] and [`BILLBOARD_VIEWS_KEY`]).
+    /// Unlit (`KHR_materials_unlit`), a back-face u offset, baked billboard views and alpha as
+    /// coverage (the material's extras, [`BACK_UV_OFFSET_KEY`], [`BILLBOARD_VIEWS_KEY`] and
+    /// [`ALPHA_COVERAGE_KEY`]).
     pub shading: Shading,
 }
 
@@ -425,8 +426,9 @@ pub struct GlbPart {
     /// Base colour factor (linear RGBA).
     pub color: [f32; 4],
     pub alpha_mask: bool,
-    /// The material's `KHR_materials_unlit`, back-face u offset and billboard views (its
-    /// extras' [`BACK_UV_OFFSET_KEY`] and [`BILLBOARD_VIEWS_KEY`]).
+    /// The material's `KHR_materials_unlit`, back-face u offset, billboard views and alpha as
+    /// coverage (its extras' [`BACK_UV_OFFSET_KEY`], [`BILLBOARD_VIEWS_KEY`] and
+    /// [`ALPHA_COVERAGE_KEY`]).
     pub shading: Shading,
 }
 
