@@ -1,5 +1,7 @@
-// Frond render core v1: textured meshes, alpha test, two-sided Lambert + ambient light,
-// and an id/depth pass writing the object id and the camera-frame depth of every pixel.
+// Frond render core v1: textured meshes, alpha test (or alpha as coverage), two-sided
+// Lambert + ambient light, view-dependent star billboards (quads that give way, atlas rows per
+// view elevation), and an id/depth pass writing the object id and the camera-frame depth of
+// every pixel.
 
 struct View {
     clip_from_world: mat4x4<f32>,
