@@ -58,7 +58,8 @@ pub struct StarBillboard {
     /// `bake_cameras[row * quads + quad]`).
     pub bake_cameras: Vec<ViewCamera>,
     /// How the render core draws it: unlit, the back tiles' u offset, the elevation rows and
-    /// the fading of quads seen edge-on.
+    /// the fading of quads seen edge-on (alpha as coverage is added by
+    /// [`super::asset::AssetPart::shading`]).
     pub shading: Shading,
 }
 
@@ -251,7 +252,8 @@ pub fn bake_star(
                 axis: [frame.axis.x, frame.axis.y],
                 plant_z: [frame.z_range.0, frame.z_range.1],
             }),
-            alpha_coverage: true,
+            // Derived where it is drawn (`AssetPart::shading`: a cut-out with views).
+            alpha_coverage: false,
         },
     })
 }

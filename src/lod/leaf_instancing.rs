@@ -379,20 +379,50 @@ pub fn read_glb_leaves(path: &std::path::Path) -> Result<GlbLeaves, crate::model
     Ok(out)
 }
 
-/// The plant with its leaves instanced, as a glb any viewer reads: one mesh per master leaf,
-/// and a node per leaf that uses its master's mesh with the instance transform as its
-/// `matrix` (glTF's own instancing: nodes sharing a mesh); wood as it was.
-pub fn write_instanced_glb(plant: &GlbLeaves, instancing: &LeafInstancing) -> Vec<u8> {
-    use crate::model::gltf::{GlbBuilder, PrimitiveSpec, UP_KEY};
+/// A glb builder for an instanced plant: the plant's up direction in the asset's extras and
+/// its images added as textures (their indices, in order).
+fn instanced_builder(plant: &GlbLeaves) -> (crate::model::gltf::GlbBuilder, Vec<usize>) {
+    use crate::model::gltf::{GlbBuilder, UP_KEY};
     let mut builder = GlbBuilder::new(&format!("frond {}", env!("CARGO_PKG_VERSION")));
     builder.set_asset_extras(serde_json::json!({
         UP_KEY: [plant.up_world.x, plant.up_world.y, plant.up_world.z]
     }));
-    let textures: Vec<usize> = plant
+    let textures = plant
         .images
         .iter()
         .map(|i| builder.add_texture(i))
         .collect();
+    (builder, textures)
+}
+
+/// One scene node per instance (`{prefix}_NNN`), using its master's mesh with the instance
+/// transform as its `matrix`; instances whose master has no mesh are skipped.
+fn add_instance_nodes(
+    builder: &mut crate::model::gltf::GlbBuilder,
+    instancing: &LeafInstancing,
+    master_meshes: &[Option<usize>],
+    prefix: &str,
+) {
+    for (i, instance) in instancing.instances.iter().enumerate() {
+        let Some(mesh) = master_meshes[instance.master] else {
+            continue;
+        };
+        let matrix: Vec<f64> = instance.world_from_master.iter().copied().collect();
+        let node = builder.add_node(serde_json::json!({
+            "name": format!("{prefix}_{i:03}"),
+            "mesh": mesh,
+            "matrix": matrix,
+        }));
+        builder.add_to_scene(node);
+    }
+}
+
+/// The plant with its leaves instanced, as a glb any viewer reads: one mesh per master leaf,
+/// and a node per leaf that uses its master's mesh with the instance transform as its
+/// `matrix` (glTF's own instancing: nodes sharing a mesh); wood as it was.
+pub fn write_instanced_glb(plant: &GlbLeaves, instancing: &LeafInstancing) -> Vec<u8> {
+    use crate::model::gltf::PrimitiveSpec;
+    let (mut builder, textures) = instanced_builder(plant);
     let master_meshes: Vec<Option<usize>> = instancing
         .masters
         .iter()
@@ -407,18 +437,7 @@ pub fn write_instanced_glb(plant: &GlbLeaves, instancing: &LeafInstancing) -> Ve
             )
         })
         .collect();
-    for (i, instance) in instancing.instances.iter().enumerate() {
-        let Some(mesh) = master_meshes[instance.master] else {
-            continue;
-        };
-        let matrix: Vec<f64> = instance.world_from_master.iter().copied().collect();
-        let node = builder.add_node(serde_json::json!({
-            "name": format!("leaf_{i:03}"),
-            "mesh": mesh,
-            "matrix": matrix,
-        }));
-        builder.add_to_scene(node);
-    }
+    add_instance_nodes(&mut builder, instancing, &master_meshes, "leaf");
     for (k, part) in plant.wood.iter().enumerate() {
         let mesh = builder.add_mesh(
             &part.name,
@@ -519,16 +538,8 @@ pub fn write_instanced_twigs_glb(
     twigs: &[Twig],
     instancing: &LeafInstancing,
 ) -> Vec<u8> {
-    use crate::model::gltf::{GlbBuilder, PrimitiveSpec, UP_KEY};
-    let mut builder = GlbBuilder::new(&format!("frond {}", env!("CARGO_PKG_VERSION")));
-    builder.set_asset_extras(serde_json::json!({
-        UP_KEY: [plant.up_world.x, plant.up_world.y, plant.up_world.z]
-    }));
-    let textures: Vec<usize> = plant
-        .images
-        .iter()
-        .map(|i| builder.add_texture(i))
-        .collect();
+    use crate::model::gltf::PrimitiveSpec;
+    let (mut builder, textures) = instanced_builder(plant);
     let leaf_primitives = |leaves: &[usize]| -> Vec<(TriMesh, Option<usize>)> {
         let mut by_image: Vec<(TriMesh, Option<usize>)> = Vec::new();
         for &leaf in leaves {
@@ -565,16 +576,7 @@ pub fn write_instanced_twigs_glb(
             builder.add_mesh(&format!("twig_master_{k:03}"), &primitives)
         })
         .collect();
-    for (i, instance) in instancing.instances.iter().enumerate() {
-        let Some(mesh) = master_meshes[instance.master] else {
-            continue;
-        };
-        let matrix: Vec<f64> = instance.world_from_master.iter().copied().collect();
-        let node = builder.add_node(serde_json::json!({
-            "name": format!("twig_{i:03}"), "mesh": mesh, "matrix": matrix,
-        }));
-        builder.add_to_scene(node);
-    }
+    add_instance_nodes(&mut builder, instancing, &master_meshes, "twig");
     // What is not in a twig: its leaves one by one, the wood whole minus the twigs' tubes.
     let in_twig: std::collections::BTreeSet<usize> = twigs
         .iter()

@@ -131,16 +131,13 @@ pub struct PrimitiveSpec<'a> {
     pub double_sided: bool,
     /// Cut-out transparency (`alphaMode: MASK`, cutoff ½).
     pub alpha_mask: bool,
-    /// Unlit (`KHR_materials_unlit`), a back-face u offset, baked billboard views and alpha as
-    /// coverage (the material's extras, [`BACK_UV_OFFSET_KEY`], [`BILLBOARD_VIEWS_KEY`] and
-    /// [`ALPHA_COVERAGE_KEY`]).
+    /// Unlit (`KHR_materials_unlit`), a back-face u offset and baked billboard views (the
+    /// material's extras, [`BACK_UV_OFFSET_KEY`] and [`BILLBOARD_VIEWS_KEY`]).
     pub shading: Shading,
 }
 
 /// Key of a material's back-face u offset in its `extras`.
 pub const BACK_UV_OFFSET_KEY: &str = "frond_back_uv_offset";
-/// Key of a material's alpha-as-coverage flag ([`Shading::alpha_coverage`]) in its `extras`.
-pub const ALPHA_COVERAGE_KEY: &str = "frond_alpha_coverage";
 /// Key of a billboard material's baked views ([`crate::render::BillboardViews`]) in its
 /// `extras`.
 pub const BILLBOARD_VIEWS_KEY: &str = "frond_billboard_views";
@@ -274,9 +271,6 @@ impl GlbBuilder {
             }
             if let Some(views) = &shading.views {
                 material["extras"][BILLBOARD_VIEWS_KEY] = json!(views);
-            }
-            if shading.alpha_coverage {
-                material["extras"][ALPHA_COVERAGE_KEY] = json!(true);
             }
             self.materials.push(material);
             written.push(json!({
@@ -426,9 +420,8 @@ pub struct GlbPart {
     /// Base colour factor (linear RGBA).
     pub color: [f32; 4],
     pub alpha_mask: bool,
-    /// The material's `KHR_materials_unlit`, back-face u offset, billboard views and alpha as
-    /// coverage (its extras' [`BACK_UV_OFFSET_KEY`], [`BILLBOARD_VIEWS_KEY`] and
-    /// [`ALPHA_COVERAGE_KEY`]).
+    /// The material's `KHR_materials_unlit`, back-face u offset and billboard views (its
+    /// extras' [`BACK_UV_OFFSET_KEY`] and [`BILLBOARD_VIEWS_KEY`]).
     pub shading: Shading,
 }
 
@@ -630,9 +623,8 @@ fn material_shading(material: &gltf::Material) -> Shading {
         views: extra(BILLBOARD_VIEWS_KEY)
             .and_then(|v| serde_json::from_value::<BillboardViews>(v).ok())
             .filter(|v| v.elevation_step_rad.is_finite()),
-        alpha_coverage: extra(ALPHA_COVERAGE_KEY)
-            .and_then(|v| v.as_bool())
-            .unwrap_or(false),
+        // A render-time choice (`lod::asset::AssetPart::shading` makes it), not stored.
+        alpha_coverage: false,
     }
 }
 
