@@ -291,8 +291,6 @@ enum Command {
         #[arg(long)]
         plot: PathBuf,
     },
-    /// Measure a reconstruction's organs: `traits.csv` (long form: plant, organ_id,
-    /// organ_type, trait, value, unit) and `traits.json`, written into the folder (or --out).
     /// Approximate instancing below the plant (seed 003 on leaves): leaves clustered by shape
     /// into a few master leaves; prints unique meshes, memory and the geometric and pixel
     /// error against the exact leaves for each number of masters, and with --out writes the
@@ -378,6 +376,8 @@ enum Command {
         #[arg(long)]
         seed: Option<u64>,
     },
+    /// Measure a reconstruction's organs: `traits.csv` (long form: plant, organ_id,
+    /// organ_type, trait, value, unit) and `traits.json`, written into the folder (or --out).
     Traits {
         /// A `frond reconstruct` output folder (or, with --truth, a synthetic dataset).
         reconstruction: PathBuf,

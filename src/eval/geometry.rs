@@ -2,7 +2,9 @@
 
 use nalgebra::Point3;
 
-use super::{SkeletonRecord, SkeletonScores};
+use std::collections::BTreeSet;
+
+use super::{GtLeafRecord, SkeletonLengthScores, SkeletonRecord, SkeletonScores};
 use crate::branch::spline::point_segment_distance;
 use crate::mesh::{TriMesh, point_triangle_distance};
 use crate::util::rng::Rng;
@@ -76,8 +78,98 @@ fn distance_to_polylines(p: &Point3<f64>, lines: &[Vec<Point3<f64>>]) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
-/// Scores a predicted skeleton against the GT branches (see [`SkeletonScores`]).
-pub fn score_skeleton(gt: &[SkeletonRecord], predicted: &[SkeletonRecord]) -> SkeletonScores {
+/// The true branches that are petioles: each carries a leaf and has no child branch. When no
+/// leaf record names its branch, every branch without children other than the root.
+pub fn petiole_ids(gt: &[SkeletonRecord], leaves: &[(GtLeafRecord, TriMesh)]) -> BTreeSet<u32> {
+    let parents: BTreeSet<u32> = gt.iter().filter_map(|b| b.parent).collect();
+    let bearing: BTreeSet<u32> = leaves.iter().filter_map(|(r, _)| r.branch).collect();
+    gt.iter()
+        .filter(|b| b.parent.is_some() && !parents.contains(&b.id))
+        .filter(|b| bearing.is_empty() || bearing.contains(&b.id))
+        .map(|b| b.id)
+        .collect()
+}
+
+/// A polyline cut into pieces no longer than `step`: (midpoint, length) of each.
+fn pieces(line: &[[f64; 3]], step: f64) -> Vec<(Point3<f64>, f64)> {
+    let mut out = Vec::new();
+    for w in line.windows(2) {
+        let (a, b) = (Point3::from(w[0]), Point3::from(w[1]));
+        let length = (b - a).norm();
+        if !length.is_finite() || length <= 0.0 {
+            continue;
+        }
+        let n = (length / step).ceil().max(1.0) as usize;
+        for k in 0..n {
+            let t = (k as f64 + 0.5) / n as f64;
+            out.push((a + (b - a) * t, length / n as f64));
+        }
+    }
+    out
+}
+
+/// Length-weighted recall (branches and petioles apart) and precision of a predicted skeleton
+/// (see [`SkeletonLengthScores`]).
+pub fn skeleton_length_scores(
+    gt: &[SkeletonRecord],
+    petioles: &BTreeSet<u32>,
+    predicted: &[SkeletonRecord],
+) -> SkeletonLengthScores {
+    const STEP: f64 = 0.001;
+    let tolerance = |b: &SkeletonRecord| (2.0 * b.mean_radius()).max(0.003);
+    let predicted_lines: Vec<Vec<Point3<f64>>> = predicted
+        .iter()
+        .map(|b| b.centerline.iter().map(|c| Point3::from(*c)).collect())
+        .collect();
+    let (mut found, mut total) = ([0.0; 2], [0.0; 2]);
+    for branch in gt {
+        let class = usize::from(petioles.contains(&branch.id));
+        let limit = tolerance(branch);
+        for (p, length) in pieces(&branch.centerline, STEP) {
+            total[class] += length;
+            if distance_to_polylines(&p, &predicted_lines) <= limit {
+                found[class] += length;
+            }
+        }
+    }
+    let true_lines: Vec<(Vec<Point3<f64>>, f64)> = gt
+        .iter()
+        .map(|b| {
+            let line = b.centerline.iter().map(|c| Point3::from(*c)).collect();
+            (line, tolerance(b))
+        })
+        .collect();
+    let (mut on, mut predicted_length) = (0.0, 0.0);
+    for branch in predicted {
+        for (p, length) in pieces(&branch.centerline, STEP) {
+            predicted_length += length;
+            let near = true_lines.iter().any(|(line, limit)| {
+                line.windows(2)
+                    .any(|w| point_segment_distance(&p, &w[0], &w[1]) <= *limit)
+            });
+            if near {
+                on += length;
+            }
+        }
+    }
+    let share = |a: f64, b: f64| if b > 0.0 { a / b } else { 0.0 };
+    SkeletonLengthScores {
+        true_branch_length: total[0],
+        true_petiole_length: total[1],
+        predicted_length,
+        branch_recall: share(found[0], total[0]),
+        petiole_recall: share(found[1], total[1]),
+        precision: share(on, predicted_length),
+    }
+}
+
+/// Scores a predicted skeleton against the GT branches (see [`SkeletonScores`]); `petioles`
+/// are the true branches scored as petioles (see [`petiole_ids`]).
+pub fn score_skeleton(
+    gt: &[SkeletonRecord],
+    petioles: &BTreeSet<u32>,
+    predicted: &[SkeletonRecord],
+) -> SkeletonScores {
     let lines: Vec<Vec<Point3<f64>>> = predicted
         .iter()
         .map(|b| b.centerline.iter().map(|c| Point3::from(*c)).collect())
@@ -119,6 +211,7 @@ pub fn score_skeleton(gt: &[SkeletonRecord], predicted: &[SkeletonRecord]) -> Sk
         } else {
             matched as f64 / eligible.len() as f64
         },
+        length: skeleton_length_scores(gt, petioles, predicted),
     }
 }
 
@@ -181,15 +274,124 @@ mod tests {
             centerline: (0..50).map(|k| [0.0, 0.0, k as f64 * 0.01]).collect(),
         };
         let gt = vec![stem.clone()];
-        let perfect = score_skeleton(&gt, &gt);
+        let none = BTreeSet::new();
+        let perfect = score_skeleton(&gt, &none, &gt);
         assert!(perfect.stem_distance_in_radii.unwrap() < 1e-9);
         assert_eq!(perfect.branch_recall, 1.0);
+        assert!((perfect.length.branch_recall - 1.0).abs() < 1e-9);
+        assert!((perfect.length.precision - 1.0).abs() < 1e-9);
+        assert!((perfect.length.true_branch_length - 0.49).abs() < 1e-9);
         let mut shifted = stem;
         for c in &mut shifted.centerline {
             c[0] += 0.05;
         }
-        let scores = score_skeleton(&gt, &[shifted]);
+        let scores = score_skeleton(&gt, &none, &[shifted]);
         assert!((scores.stem_distance_in_radii.unwrap() - 5.0).abs() < 1e-6);
         assert_eq!(scores.matched_branches, 0);
+        assert_eq!(scores.length.branch_recall, 0.0);
+        assert_eq!(scores.length.precision, 0.0);
+    }
+
+    fn record(id: u32, parent: Option<u32>, radius: f64, line: Vec<[f64; 3]>) -> SkeletonRecord {
+        SkeletonRecord {
+            id,
+            parent,
+            parent_fraction: 1.0,
+            control_points: Vec::new(),
+            radius_start: radius,
+            radius_end: radius,
+            length: 0.0,
+            centerline: line,
+        }
+    }
+
+    #[test]
+    fn length_scores_keep_petioles_apart_and_charge_a_pot_rim_to_precision() {
+        // A 0.3 m stem, a 0.2 m petiole leaving its top sideways, a 0.1 m twig with a child.
+        let stem = record(
+            0,
+            None,
+            0.004,
+            (0..=30).map(|k| [0.0, 0.0, k as f64 * 0.01]).collect(),
+        );
+        let petiole = record(
+            1,
+            Some(0),
+            0.002,
+            (0..=20).map(|k| [k as f64 * 0.01, 0.0, 0.3]).collect(),
+        );
+        let twig = record(
+            2,
+            Some(0),
+            0.002,
+            (0..=10).map(|k| [0.0, k as f64 * 0.01, 0.2]).collect(),
+        );
+        let twig_child = record(
+            3,
+            Some(2),
+            0.001,
+            (0..=5).map(|k| [0.0, 0.1, 0.2 + k as f64 * 0.01]).collect(),
+        );
+        let gt = vec![stem.clone(), petiole, twig, twig_child];
+        let leaves = vec![
+            (
+                GtLeafRecord {
+                    id: 0,
+                    length: 0.1,
+                    area: 0.01,
+                    mesh: String::new(),
+                    branch: Some(1),
+                },
+                TriMesh::default(),
+            ),
+            (
+                GtLeafRecord {
+                    id: 1,
+                    length: 0.1,
+                    area: 0.01,
+                    mesh: String::new(),
+                    branch: Some(3),
+                },
+                TriMesh::default(),
+            ),
+        ];
+        let petioles = petiole_ids(&gt, &leaves);
+        assert_eq!(petioles.into_iter().collect::<Vec<_>>(), vec![1, 3]);
+        // Without leaf records every childless non-root branch is a petiole.
+        assert_eq!(
+            petiole_ids(&gt, &[]).into_iter().collect::<Vec<_>>(),
+            vec![1, 3]
+        );
+        let petioles = petiole_ids(&gt, &leaves);
+        // The prediction: the stem 2 mm off axis and a pot rim (a circle of radius 0.1 m at
+        // the floor), nothing else.
+        let rim = record(
+            9,
+            None,
+            0.003,
+            (0..=64)
+                .map(|k| {
+                    let a = k as f64 / 64.0 * std::f64::consts::TAU;
+                    [0.1 * a.cos(), 0.1 * a.sin(), -0.05]
+                })
+                .collect(),
+        );
+        let mut off = stem;
+        for c in &mut off.centerline {
+            c[0] += 0.002;
+        }
+        let scores = skeleton_length_scores(&gt, &petioles, &[off, rim.clone()]);
+        // Branch length is stem + twig = 0.4 m; the stem (0.3 m) is found. Petioles 0.25 m,
+        // none found except where the petiole leaves the stem (within 3 mm of it).
+        assert!((scores.true_branch_length - 0.4).abs() < 1e-9);
+        assert!((scores.true_petiole_length - 0.25).abs() < 1e-9);
+        assert!((scores.branch_recall - 0.75).abs() < 0.01, "{scores:?}");
+        assert!(scores.petiole_recall < 0.03, "{scores:?}");
+        let rim_length = rim.centerline_length();
+        let expected = 0.3 / (0.3 + rim_length);
+        assert!(
+            (scores.precision - expected).abs() < 0.01,
+            "{scores:?} vs {expected}"
+        );
     }
 }

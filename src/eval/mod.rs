@@ -108,6 +108,9 @@ pub struct GtLeafRecord {
     pub length: f64,
     pub area: f64,
     pub mesh: String,
+    /// The branch (petiole or twig) the leaf grows from, when the dataset says.
+    #[serde(default)]
+    pub branch: Option<u32>,
 }
 
 pub use crate::branch::plant::{SkeletonFile, SkeletonRecord};
@@ -300,6 +303,28 @@ pub struct SkeletonScores {
     /// predicted skeleton.
     pub matched_branches: usize,
     pub branch_recall: f64,
+    /// Length-weighted scores, branches and petioles apart.
+    pub length: SkeletonLengthScores,
+}
+
+/// Length-weighted skeleton scores. A true centreline point is found when the prediction
+/// passes within its branch's tolerance (2 mean radii, at least 3 mm); a predicted point is on
+/// the plant when it lies within the tolerance of some true branch. A *petiole* is a true
+/// branch that carries a leaf and has no child branch (without leaf records: any branch
+/// without children other than the stem); every other true branch, the stem included, is a
+/// *branch*.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct SkeletonLengthScores {
+    /// True branch (stem included) centreline length, model units of the truth (metres).
+    pub true_branch_length: f64,
+    pub true_petiole_length: f64,
+    pub predicted_length: f64,
+    /// Share of the true branch length the prediction passes within tolerance of.
+    pub branch_recall: f64,
+    /// Share of the true petiole length the prediction passes within tolerance of.
+    pub petiole_recall: f64,
+    /// Share of the predicted length within tolerance of some true branch or petiole.
+    pub precision: f64,
 }
 
 /// The evaluation report.
@@ -494,10 +519,10 @@ pub fn evaluate(
     let pick = |f: fn(&LeafGeometryError) -> f64| {
         Summary::of(&leaf_geometry.iter().map(f).collect::<Vec<_>>())
     };
-    let skeleton = pred
-        .skeleton
-        .as_ref()
-        .map(|skeleton| geometry::score_skeleton(&gt.branches, skeleton));
+    let skeleton = pred.skeleton.as_ref().map(|skeleton| {
+        let petioles = geometry::petiole_ids(&gt.branches, &gt.leaves);
+        geometry::score_skeleton(&gt.branches, &petioles, skeleton)
+    });
     Ok(EvalReport {
         points_scored: n,
         pairing,
@@ -575,6 +600,16 @@ impl EvalReport {
                 k.branch_recall,
                 k.matched_branches,
                 k.eligible_branches
+            );
+            let _ = writeln!(
+                s,
+                "skeleton length:   branch recall {:.3} of {:.3} m, petiole recall {:.3} of {:.3} m, precision {:.3} of {:.3} m",
+                k.length.branch_recall,
+                k.length.true_branch_length,
+                k.length.petiole_recall,
+                k.length.true_petiole_length,
+                k.length.precision,
+                k.length.predicted_length
             );
         }
         s
