@@ -1026,8 +1026,13 @@ fn eval_dense(gt: &Path, dense: &Path, json: bool) -> Result<()> {
     let (similarity, alignment) = align_to_ground_truth(gt, &model_dir)?;
     let aligned: Vec<_> = positions.iter().map(|p| similarity.apply(p)).collect();
     let accuracy = frond::eval::dense::point_accuracy(&truth, &aligned, 0.02)?;
+    let thin = frond::eval::dense::thin_organ_accuracy(&truth, &aligned, 0.002)?;
     if json {
-        let value = serde_json::json!({ "alignment": alignment, "points": accuracy });
+        let value = serde_json::json!({
+            "alignment": alignment,
+            "points": accuracy,
+            "thin_organs": thin,
+        });
         println!("{}", serde_json::to_string_pretty(&value)?);
     } else {
         println!(
@@ -1044,6 +1049,20 @@ fn eval_dense(gt: &Path, dense: &Path, json: bool) -> Result<()> {
             accuracy.p90_error * 1e3,
             alignment.cameras_matched,
             alignment.rms_camera_residual * 1e3,
+        );
+        println!(
+            "stems and petioles: {:.1} % of {:.3} m of centreline with a point within radius + {:.0} mm, \
+             {:.0} points per metre, median {:.2} mm from the true surface\n\
+             halo: {:.1} % of the {} points in the plant's space lie farther than two pixel footprints \
+             ({:.2} mm) from every true surface",
+            thin.centerline_coverage * 100.0,
+            thin.centerline_length,
+            thin.near * 1e3,
+            thin.points_per_metre,
+            thin.median_surface_distance * 1e3,
+            thin.halo_fraction * 100.0,
+            thin.points_in_plant_space,
+            2.0 * thin.pixel_footprint * 1e3,
         );
     }
     Ok(())

@@ -125,7 +125,7 @@ pub struct GroundTruth {
     pub plant_height: f64,
 }
 
-fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, EvalError> {
+pub(crate) fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, EvalError> {
     let text = std::fs::read_to_string(path).map_err(|e| input_error(path, e.to_string()))?;
     serde_json::from_str(&text).map_err(|e| input_error(path, e.to_string()))
 }

@@ -92,6 +92,23 @@ impl Neighbours {
         self.nearest_k_to(&self.coordinates[i], wanted)
     }
 
+    /// Every point within `radius` of `query`, nearest first.
+    pub fn within_radius(&self, query: &Point3<f64>, radius: f64) -> Vec<Neighbour> {
+        if self.is_empty() || radius.is_nan() || radius < 0.0 {
+            return Vec::new();
+        }
+        self.tree
+            .query(&[query.x, query.y, query.z])
+            .within::<SquaredEuclidean<f64>>(radius * radius)
+            .execute()
+            .into_iter()
+            .map(|found| Neighbour {
+                index: found.item as usize,
+                distance_squared: found.distance,
+            })
+            .collect()
+    }
+
     fn nearest_k_to(&self, query: &[f64; 3], k: NonZero<usize>) -> Vec<Neighbour> {
         self.tree
             .query(query)
@@ -152,5 +169,19 @@ mod tests {
         );
         // Never more than the tree holds.
         assert_eq!(neighbours.around(0, 10_000).len(), points.len());
+        // A radius query finds exactly the points within the radius, nearest first.
+        let radius = 0.3;
+        let inside: Vec<f64> = expected
+            .iter()
+            .copied()
+            .filter(|d| *d <= radius * radius)
+            .collect();
+        assert!(inside.len() > 5 && inside.len() < points.len());
+        let found = neighbours.within_radius(&query, radius);
+        assert_eq!(
+            found.iter().map(|n| n.distance_squared).collect::<Vec<_>>(),
+            inside
+        );
+        assert!(neighbours.within_radius(&query, -1.0).is_empty());
     }
 }
