@@ -147,7 +147,63 @@ fn main() -> Result<()> {
         tree.branches.len(),
         run.error
     );
-    let Some(out) = args.get(3) else {
+    // The thin-organ sweep's points come after the fused ones (densify.json says how many).
+    let fused_count = std::fs::read_to_string(dense.join("densify.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .and_then(|v| v["report"]["fusion"]["points"].as_u64())
+        .map(|n| n as usize);
+    if let Some(fused) = fused_count.filter(|&n| n < positions.len()) {
+        let mut histogram: BTreeMap<&str, usize> = BTreeMap::new();
+        let mut offsets: Vec<f64> = Vec::new();
+        for (k, p) in positions.iter().enumerate().skip(fused) {
+            let axis = truth
+                .branches
+                .iter()
+                .map(|b| {
+                    b.centerline
+                        .windows(2)
+                        .map(|w| {
+                            frond::branch::spline::point_segment_distance(
+                                p,
+                                &Point3::from(w[0]),
+                                &Point3::from(w[1]),
+                            ) - b.mean_radius()
+                        })
+                        .fold(f64::INFINITY, f64::min)
+                })
+                .fold(f64::INFINITY, f64::min);
+            let class = match (part_of[k], axis) {
+                (Some(1), _) => "on a stem surface",
+                (Some(0), _) => "on a leaf",
+                (Some(2), _) => "on the pot",
+                (_, a) if a < 0.005 => "within 5 mm of a stem surface",
+                (_, a) if a < 0.02 => "5-20 mm from a stem surface",
+                _ => "elsewhere",
+            };
+            *histogram.entry(class).or_default() += 1;
+            if axis < 0.02 {
+                offsets.push(axis);
+            }
+        }
+        offsets.sort_by(f64::total_cmp);
+        if !offsets.is_empty() {
+            let q = |f: f64| offsets[((offsets.len() - 1) as f64 * f) as usize] * 1e3;
+            println!(
+                "thin points within 20 mm of a stem: distance to its surface (mm, negative inside) 10/25/50/75/90 %: {:.1} {:.1} {:.1} {:.1} {:.1}",
+                q(0.1),
+                q(0.25),
+                q(0.5),
+                q(0.75),
+                q(0.9)
+            );
+        }
+        println!("thin-organ sweep points: {}", positions.len() - fused);
+        for (class, n) in &histogram {
+            println!("  {class:32} {n:7}");
+        }
+    }
+    let Some(out) = args.get(3).filter(|a| !a.starts_with("--")) else {
         return Ok(());
     };
     // Two panels: side (x, z) and top (x, y), around the true plant.
@@ -181,6 +237,24 @@ fn main() -> Result<()> {
     for (i, p) in positions.iter().enumerate() {
         if !in_input[i] && part_of[i].is_some() {
             plot(p, Rgb([215, 215, 215]), 1);
+        }
+    }
+    // With --halo: every point away from the true surfaces inside the plant's box, in orange.
+    if args.iter().any(|a| a == "--halo") {
+        let (lo, hi) = gt_points.iter().fold(
+            (
+                Point3::from([f64::INFINITY; 3]),
+                Point3::from([f64::NEG_INFINITY; 3]),
+            ),
+            |(lo, hi), p| (lo.inf(p), hi.sup(p)),
+        );
+        let margin = 0.3 * (hi - lo).norm();
+        for (i, p) in positions.iter().enumerate() {
+            let inside =
+                (0..3).all(|a| p[a] > lo[a] - margin && p[a] < hi[a] + margin) && p.z > lo.z + 0.01;
+            if part_of[i].is_none() && inside {
+                plot(p, Rgb([255, 140, 0]), 1);
+            }
         }
     }
     for &i in &input {

@@ -608,6 +608,16 @@ struct DensifyArgs {
     /// Point spacing: the merge voxel's side in pixel footprints at the object.
     #[arg(long, default_value_t = 1.5)]
     voxel_pixels: f64,
+    /// Skip the thin-organ sweep (stems and petioles found as bars in the photos and
+    /// triangulated across views).
+    #[arg(long)]
+    no_thin: bool,
+    /// Thin-organ sweep: least colour contrast (RGB distance) of a bar against both sides.
+    #[arg(long, default_value_t = 14.0)]
+    thin_contrast: f64,
+    /// Thin-organ sweep: neighbour views that must see the bar at the same depth.
+    #[arg(long, default_value_t = 3)]
+    thin_views: usize,
 }
 
 impl DensifyArgs {
@@ -641,6 +651,15 @@ impl DensifyArgs {
             bail!("--voxel-pixels must be at least 0.5");
         }
         options.fusion.voxel_pixels = self.voxel_pixels;
+        options.thin.enabled = !self.no_thin;
+        if !(self.thin_contrast > 0.0 && self.thin_contrast.is_finite()) {
+            bail!("--thin-contrast must be positive");
+        }
+        options.thin.min_contrast = self.thin_contrast;
+        if self.thin_views == 0 || self.thin_views > options.thin.neighbour_views {
+            bail!("--thin-views must be 1 to {}", options.thin.neighbour_views);
+        }
+        options.thin.min_supporting = self.thin_views;
         Ok(options)
     }
 }

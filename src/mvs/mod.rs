@@ -17,6 +17,7 @@ pub mod fusion;
 pub mod pairs;
 pub mod rectify;
 pub mod stereo;
+pub mod thin;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -28,6 +29,7 @@ use serde::Serialize;
 pub use fusion::{FusedPoints, FusionOptions, FusionStats, RegionOfInterest};
 pub use pairs::{PairOptions, StereoPair};
 pub use stereo::{RectifiedDepthMap, StereoOptions};
+pub use thin::{ThinOptions, ThinStats};
 
 use crate::scene::model::{Image, Keypoint, Point3D, TrackElement};
 use crate::scene::ply::{Column, Element, Ply, ScalarType, encode_ply_binary};
@@ -48,6 +50,8 @@ pub struct DensifyOptions {
     pub pairs: PairOptions,
     pub stereo: StereoOptions,
     pub fusion: FusionOptions,
+    /// The thin-organ sweep ([`thin`]), whose points are added to the fused ones.
+    pub thin: ThinOptions,
 }
 
 impl Default for DensifyOptions {
@@ -58,6 +62,7 @@ impl Default for DensifyOptions {
             pairs: PairOptions::default(),
             stereo: StereoOptions::default(),
             fusion: FusionOptions::default(),
+            thin: ThinOptions::default(),
         }
     }
 }
@@ -113,6 +118,8 @@ pub struct DensifyReport {
     pub region_of_interest: Option<RegionOfInterest>,
     pub depth_pixels: usize,
     pub fusion: FusionStats,
+    /// The thin-organ sweep, when it ran (its points are in the output, after the fused ones).
+    pub thin: Option<ThinStats>,
     pub mean_views_per_point: f64,
     pub timings: BTreeMap<String, f64>,
 }
@@ -159,23 +166,45 @@ pub fn densify(
     options: &DensifyOptions,
     progress: &dyn Progress,
 ) -> Result<(FusedPoints, DensifyReport), MvsError> {
-    let (maps, mut report) = depth_maps(scene, options, progress)?;
+    let (maps, loaded, mut report) = depth_maps_and_views(scene, options, progress)?;
     let started = Instant::now();
-    let (fused, stats) = fusion::fuse(
+    let (mut fused, stats) = fusion::fuse(
         &maps,
         &options.fusion,
         report.region_of_interest.as_ref(),
         progress,
     );
+    let voxel = stats.voxel_size;
     report.fusion = stats;
+    report
+        .timings
+        .insert("fusion".to_owned(), started.elapsed().as_secs_f64());
+    if options.thin.enabled {
+        let started = Instant::now();
+        progress.stage("thin organs", 0);
+        let (thin, stats) = thin::sweep(
+            &scene.reconstruction,
+            &loaded,
+            report.region_of_interest.as_ref(),
+            voxel,
+            &options.thin,
+        )
+        .map_err(|e| MvsError::NoDepth(format!("thin-organ sweep: {e}")))?;
+        let (thin, stats) = thin::where_stereo_is_sparse(thin, stats, &fused, voxel);
+        fused.positions_world.extend(thin.positions_world);
+        fused.colors.extend(thin.colors);
+        fused.views.extend(thin.views);
+        fused.support.extend(thin.support);
+        report.thin = Some(stats);
+        report
+            .timings
+            .insert("thin".to_owned(), started.elapsed().as_secs_f64());
+    }
     report.mean_views_per_point = if fused.is_empty() {
         0.0
     } else {
         fused.views.iter().map(Vec::len).sum::<usize>() as f64 / fused.len() as f64
     };
-    report
-        .timings
-        .insert("fusion".to_owned(), started.elapsed().as_secs_f64());
     Ok((fused, report))
 }
 
@@ -186,6 +215,22 @@ pub fn depth_maps(
     options: &DensifyOptions,
     progress: &dyn Progress,
 ) -> Result<(Vec<RectifiedDepthMap>, DensifyReport), MvsError> {
+    depth_maps_and_views(scene, options, progress).map(|(maps, _, report)| (maps, report))
+}
+
+/// [`depth_maps`] and the views it loaded (model image position, downsized photo).
+fn depth_maps_and_views(
+    scene: &Scene,
+    options: &DensifyOptions,
+    progress: &dyn Progress,
+) -> Result<
+    (
+        Vec<RectifiedDepthMap>,
+        Vec<(usize, LoadedView)>,
+        DensifyReport,
+    ),
+    MvsError,
+> {
     let model = &scene.reconstruction;
     let images = model.images();
     if images.len() < 2 {
@@ -290,7 +335,7 @@ pub fn depth_maps(
     report.depth_pixels = maps.iter().map(RectifiedDepthMap::valid_pixels).sum();
     lap("stereo", &mut report);
 
-    Ok((maps, report))
+    Ok((maps, loaded, report))
 }
 
 /// Rectifies and matches one pair.
