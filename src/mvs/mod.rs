@@ -218,19 +218,20 @@ pub fn depth_maps(
     depth_maps_and_views(scene, options, progress).map(|(maps, _, report)| (maps, report))
 }
 
+/// Depth maps, the views they were matched on (model image position, downsized photo) and
+/// the report so far.
+type DepthMapsAndViews = (
+    Vec<RectifiedDepthMap>,
+    Vec<(usize, LoadedView)>,
+    DensifyReport,
+);
+
 /// [`depth_maps`] and the views it loaded (model image position, downsized photo).
 fn depth_maps_and_views(
     scene: &Scene,
     options: &DensifyOptions,
     progress: &dyn Progress,
-) -> Result<
-    (
-        Vec<RectifiedDepthMap>,
-        Vec<(usize, LoadedView)>,
-        DensifyReport,
-    ),
-    MvsError,
-> {
+) -> Result<DepthMapsAndViews, MvsError> {
     let model = &scene.reconstruction;
     let images = model.images();
     if images.len() < 2 {

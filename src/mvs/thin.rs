@@ -751,7 +751,7 @@ fn select(points: FusedPoints, keep: &[bool]) -> FusedPoints {
 /// Averages the points in each voxel (views united); deterministic order (by voxel).
 fn merge(points: &[ThinPoint], voxel: f64) -> FusedPoints {
     let mut fused = FusedPoints::default();
-    if !(voxel > 0.0) {
+    if voxel.is_nan() || voxel <= 0.0 {
         return fused;
     }
     let mut cells: BTreeMap<[i64; 3], Vec<usize>> = BTreeMap::new();
@@ -770,8 +770,8 @@ fn merge(points: &[ThinPoint], voxel: f64) -> FusedPoints {
         let mut views: Vec<u32> = Vec::new();
         for &k in members {
             sum += points[k].position_world.coords;
-            for c in 0..3 {
-                color[c] += f64::from(points[k].color[c]);
+            for (sum, c) in color.iter_mut().zip(points[k].color) {
+                *sum += f64::from(c);
             }
             views.extend(&points[k].views);
         }
