@@ -170,7 +170,7 @@ mod tests {
         // Never more than the tree holds.
         assert_eq!(neighbours.around(0, 10_000).len(), points.len());
         // A radius query finds exactly the points within the radius, nearest first.
-        let radius = 0.3;
+        let radius = 0.6;
         let inside: Vec<f64> = expected
             .iter()
             .copied()
