@@ -11,6 +11,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use frond::branch::plant::skeleton_point_indices;
+use frond::eval::dense::thin_organ_accuracy;
 use frond::eval::{GroundTruth, align_to_ground_truth};
 use frond::graph::neighbours::Neighbours;
 use frond::pipeline::automatic_skeleton;
@@ -66,33 +67,12 @@ fn main() -> Result<()> {
             (nearest.distance() <= NEAR).then(|| parts[nearest.index] as i64)
         })
         .collect();
-    // How much of the true centreline has a point within its radius + 2 mm, and of the points
-    // on true stems, how many per metre of centreline.
-    let dense_index =
-        Neighbours::new(positions.iter().copied()).map_err(|e| anyhow::anyhow!("{e:?}"))?;
-    let (mut covered, mut length) = (0.0, 0.0);
-    for branch in &truth.branches {
-        let limit = branch.mean_radius() + NEAR;
-        for w in branch.centerline.windows(2) {
-            let (a, b) = (Point3::from(w[0]), Point3::from(w[1]));
-            let n = ((b - a).norm() / 0.001).ceil().max(1.0) as usize;
-            for k in 0..n {
-                let p = a + (b - a) * ((k as f64 + 0.5) / n as f64);
-                let piece = (b - a).norm() / n as f64;
-                length += piece;
-                if dense_index
-                    .nearest(&p)
-                    .is_some_and(|q| q.distance() <= limit)
-                {
-                    covered += piece;
-                }
-            }
-        }
-    }
+    let thin = thin_organ_accuracy(&truth, &positions, NEAR)?;
+    let length = thin.centerline_length;
     println!(
         "true stem and petiole centreline: {:.3} m, {:.1} % with a point within radius + {} mm",
         length,
-        100.0 * covered / length.max(1e-12),
+        100.0 * thin.centerline_coverage,
         NEAR * 1e3
     );
     let input = skeleton_point_indices(&segmentation.foreground, &labels);

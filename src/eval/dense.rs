@@ -40,22 +40,15 @@ pub fn point_accuracy(
     points: &[Point3<f64>],
     gate_fraction_of_height: f64,
 ) -> Result<PointAccuracy, EvalError> {
+    let surface = TrueSurface::of(gt)?;
+    let parts = surface.parts;
     let samples = &gt.surface_samples;
-    let parts = samples
-        .parts
-        .as_ref()
-        .ok_or_else(|| input_error(&gt.root, "surface_samples.ply has no part column"))?;
-    let sample_neighbours = Neighbours::new(samples.positions.iter().copied())
-        .map_err(|e| input_error(&gt.root, format!("cannot index surface samples: {e:?}")))?;
-    let Some(neighbours) = std::num::NonZero::new(8.min(sample_neighbours.len())) else {
-        return Err(input_error(&gt.root, "no surface samples"));
-    };
     let gate = gate_fraction_of_height * gt.plant_height;
     // Per point: (distance to the surface, nearest sample) when near a plant surface.
     let hits: Vec<Option<(f64, usize)>> = points
         .par_iter()
         .map(|p| {
-            let hit = surface_distance(p, samples, parts, &sample_neighbours, neighbours)?;
+            let hit = surface.hit(p)?;
             (parts[hit.sample].is_plant() && hit.nearest <= gate)
                 .then_some((hit.surface, hit.sample))
         })
@@ -117,34 +110,61 @@ struct SurfaceHit {
     sample: usize,
 }
 
-fn surface_distance(
-    p: &Point3<f64>,
-    samples: &super::LabelledPoints,
-    parts: &[crate::synth::Part],
-    index: &Neighbours,
+/// The true surfaces of a synthetic plant: its surface samples, indexed.
+struct TrueSurface<'a> {
+    samples: &'a super::LabelledPoints,
+    parts: &'a [crate::synth::Part],
+    index: Neighbours,
     neighbours: std::num::NonZero<usize>,
-) -> Option<SurfaceHit> {
-    let nearest = index.nearest_k(p, neighbours);
-    let first = nearest.first()?;
-    let sample = first.index;
-    let distance = first.distance();
-    let same: Vec<Point3<f64>> = nearest
-        .iter()
-        .map(|n| n.index)
-        .filter(|&i| samples.leaf_ids[i] == samples.leaf_ids[sample] && parts[i] == parts[sample])
-        .map(|i| samples.positions[i])
-        .collect();
-    let to_plane = if same.len() >= 4 {
-        let shape = Shape::of(same.iter().copied());
-        (p - shape.centroid).dot(&shape.normal()).abs()
-    } else {
-        distance
-    };
-    Some(SurfaceHit {
-        surface: to_plane.min(distance),
-        nearest: distance,
-        sample,
-    })
+}
+
+impl<'a> TrueSurface<'a> {
+    fn of(gt: &'a GroundTruth) -> Result<Self, EvalError> {
+        let samples = &gt.surface_samples;
+        let parts = samples
+            .parts
+            .as_ref()
+            .ok_or_else(|| input_error(&gt.root, "surface_samples.ply has no part column"))?;
+        let index = Neighbours::new(samples.positions.iter().copied())
+            .map_err(|e| input_error(&gt.root, format!("cannot index surface samples: {e:?}")))?;
+        let Some(neighbours) = std::num::NonZero::new(8.min(index.len())) else {
+            return Err(input_error(&gt.root, "no surface samples"));
+        };
+        Ok(Self {
+            samples,
+            parts,
+            index,
+            neighbours,
+        })
+    }
+
+    /// Where `p` lies against the surface (see [`SurfaceHit`]).
+    fn hit(&self, p: &Point3<f64>) -> Option<SurfaceHit> {
+        let (samples, parts) = (self.samples, self.parts);
+        let nearest = self.index.nearest_k(p, self.neighbours);
+        let first = nearest.first()?;
+        let sample = first.index;
+        let distance = first.distance();
+        let same: Vec<Point3<f64>> = nearest
+            .iter()
+            .map(|n| n.index)
+            .filter(|&i| {
+                samples.leaf_ids[i] == samples.leaf_ids[sample] && parts[i] == parts[sample]
+            })
+            .map(|i| samples.positions[i])
+            .collect();
+        let to_plane = if same.len() >= 4 {
+            let shape = Shape::of(same.iter().copied());
+            (p - shape.centroid).dot(&shape.normal()).abs()
+        } else {
+            distance
+        };
+        Some(SurfaceHit {
+            surface: to_plane.min(distance),
+            nearest: distance,
+            sample,
+        })
+    }
 }
 
 /// Scores `points` (in the ground truth's frame) on the thin organs (see
@@ -190,23 +210,15 @@ pub fn thin_organ_accuracy(
     let mut distances: Vec<f64> = near_points.values().copied().collect();
     distances.sort_by(f64::total_cmp);
     // The halo: points in the plant's space away from every true surface.
-    let samples = &gt.surface_samples;
-    let parts = samples
-        .parts
-        .as_ref()
-        .ok_or_else(|| input_error(&gt.root, "surface_samples.ply has no part column"))?;
-    let sample_index = Neighbours::new(samples.positions.iter().copied())
-        .map_err(|e| input_error(&gt.root, format!("cannot index surface samples: {e:?}")))?;
-    let Some(k) = std::num::NonZero::new(8.min(sample_index.len())) else {
-        return Err(input_error(&gt.root, "no surface samples"));
-    };
+    let surface = TrueSurface::of(gt)?;
     let space = PlantSpace::of(gt)?;
     let footprint = pixel_footprint(gt)?;
     let inside: Vec<&Point3<f64>> = points.iter().filter(|p| space.contains(p)).collect();
     let halo = inside
         .par_iter()
         .filter(|p| {
-            surface_distance(p, samples, parts, &sample_index, k)
+            surface
+                .hit(p)
                 .is_none_or(|hit| hit.surface > 2.0 * footprint)
         })
         .count();

@@ -43,8 +43,8 @@ pub struct ThinOptions {
     /// Least bar response (RGB distance, 0–441) of a centreline pixel and of the bar a
     /// neighbour view's projection must fall on.
     pub min_contrast: f64,
-    /// Neighbour views checked per view: the closest in viewing direction within the angle
-    /// range.
+    /// Neighbour views checked per view (at most 64): the closest in viewing direction within
+    /// the angle range.
     pub neighbour_views: usize,
     pub min_angle_deg: f64,
     pub max_angle_deg: f64,
@@ -418,10 +418,12 @@ impl SweepView<'_> {
 }
 
 fn rgb_of(view: &LoadedView) -> opencv::Result<Vec<[u8; 3]>> {
+    let copy;
     let mat = if view.bgr.is_continuous() {
-        view.bgr.clone()
+        &view.bgr
     } else {
-        view.bgr.try_clone()?
+        copy = view.bgr.try_clone()?;
+        &copy
     };
     let bgr: &[opencv::core::Vec3b] = mat.data_typed()?;
     Ok(bgr.iter().map(|p| [p[2], p[1], p[0]]).collect())
@@ -515,7 +517,7 @@ fn neighbours_of(views: &[SweepView], v: usize, options: &ThinOptions) -> Vec<us
     others.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
     others
         .into_iter()
-        .take(options.neighbour_views)
+        .take(options.neighbour_views.min(64))
         .map(|(_, u)| u)
         .collect()
 }
@@ -574,17 +576,18 @@ fn sweep_view(
         let count = (travel.ceil() as usize).clamp(2, 2000);
         let color = view.bars.color[k];
         let inverse_at = |s: f64| 1.0 / near + (1.0 / far - 1.0 / near) * s / (count - 1) as f64;
-        // The neighbour views that see a bar of this colour and direction at sample `s`, and
-        // the sum of their bar responses there (largest on the bars' centrelines).
-        let support = |s: f64| -> (u8, f32) {
+        // The neighbour views that see a bar of this colour and direction at sample `s` (bit
+        // i: `neighbours[i]`), and the sum of their bar responses there (largest on the bars'
+        // centrelines).
+        let support = |s: f64| -> (u8, f32, u64) {
             let z = 1.0 / inverse_at(s);
             let point = at(z);
             if roi.is_some_and(|r| !r.contains(&point)) {
-                return (0, 0.0);
+                return (0, 0.0, 0);
             }
             let ahead = view.center_world + along * z;
-            let (mut count, mut strength) = (0u8, 0.0f32);
-            for &u in &neighbours {
+            let (mut count, mut strength, mut seen) = (0u8, 0.0f32, 0u64);
+            for (bit, &u) in neighbours.iter().enumerate() {
                 let other = &views[u];
                 let Some(pixel) = other.pixel_of(&point) else {
                     continue;
@@ -616,9 +619,10 @@ fn sweep_view(
                 if d <= max_color {
                     count += 1;
                     strength += other.bars.response_at(&pixel);
+                    seen |= 1 << bit;
                 }
             }
-            (count, strength)
+            (count, strength, seen)
         };
         scores.clear();
         scores.extend((0..count).map(|s| support(s as f64).0));
@@ -645,15 +649,16 @@ fn sweep_view(
         // Within the run, a tenth of a pixel at a time: where the supporting bars are
         // strongest, i.e. nearest their centrelines.
         let (first, last) = runs[0];
-        let (mut best_sample, mut best_strength) = (first as f64, f32::NEG_INFINITY);
+        let (_, mut best_strength, mut supporting) = support(first as f64);
+        let mut best_sample = first as f64;
         let fine_first = first.saturating_sub(1) as f64;
         let fine_last = (last + 1).min(count - 1) as f64;
         let steps = ((fine_last - fine_first) * 10.0).ceil() as usize;
         for t in 0..=steps {
             let s = fine_first + t as f64 * 0.1;
-            let (n, strength) = support(s);
+            let (n, strength, seen) = support(s);
             if n >= best && strength > best_strength {
-                (best_sample, best_strength) = (s, strength);
+                (best_sample, best_strength, supporting) = (s, strength, seen);
             }
         }
         let inverse = inverse_at(best_sample);
@@ -662,17 +667,13 @@ fn sweep_view(
         let radius = f64::from(view.bars.half_width[k]) * z / focal.max(1e-9);
         let position_world = axis_point - direction.normalize() * radius;
         let mut seen: Vec<u32> = vec![view.position as u32];
-        let middle_point = at(z);
-        for &u in &neighbours {
-            let other = &views[u];
-            if let Some(index) = other
-                .pixel_of(&middle_point)
-                .and_then(|p| other.bars.index_of(&p))
-                && other.bars.mask[index]
-            {
-                seen.push(other.position as u32);
-            }
-        }
+        seen.extend(
+            neighbours
+                .iter()
+                .enumerate()
+                .filter(|(bit, _)| supporting & (1 << bit) != 0)
+                .map(|(_, &u)| views[u].position as u32),
+        );
         seen.sort_unstable();
         stats.triangulated += 1;
         out.push(ThinPoint {
