@@ -6,7 +6,7 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use frond::branch::plant::{model_branches, skeleton_points};
+use frond::branch::plant::{TubeTest, model_branches, skeleton_points};
 use frond::branch::skeleton::{SkeletonOptions, automatic_skeleton};
 use frond::branch::{CylinderMeshing, GeneralizedCylinder, Spline};
 use frond::edit::Session;
@@ -57,7 +57,11 @@ fn branches(c: &mut Criterion) {
     let segmentation =
         segment_scene(&scene, &SegmentOptions::default(), &NoProgress).expect("segmentation");
     let session = Session::new(scene, segmentation);
-    let points = skeleton_points(session.segmentation(), session.labels());
+    let points = skeleton_points(
+        session.segmentation(),
+        session.labels(),
+        &TubeTest::default(),
+    );
     let foreground = &session.segmentation().foreground;
     let (up, centre) = (foreground.up, foreground.plant_center);
     let (tree, stats) =

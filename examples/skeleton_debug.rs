@@ -1,6 +1,6 @@
 //! Prints the automatic skeleton of a COLMAP folder: per branch, parent, length, radii and
 //! the sizes of its level-set nodes (a tuning aid).
-use frond::branch::plant::skeleton_points;
+use frond::branch::plant::{TubeTest, skeleton_points};
 use frond::branch::skeleton::{SkeletonOptions, automatic_skeleton};
 use frond::edit::Session;
 use frond::scene::Scene;
@@ -14,7 +14,11 @@ fn main() -> anyhow::Result<()> {
     let scene = Scene::open(std::path::Path::new(&path))?;
     let segmentation = segment_scene(&scene, &SegmentOptions::default(), &NoProgress)?;
     let session = Session::new(scene, segmentation);
-    let points = skeleton_points(session.segmentation(), session.labels());
+    let points = skeleton_points(
+        session.segmentation(),
+        session.labels(),
+        &TubeTest::default(),
+    );
     let foreground = &session.segmentation().foreground;
     let (tree, stats) = automatic_skeleton(
         &points,

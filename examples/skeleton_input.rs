@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use frond::branch::plant::skeleton_point_indices;
+use frond::branch::plant::{PlantSkeletonOptions, skeleton_point_indices, tube_point_indices};
 use frond::eval::dense::thin_organ_accuracy;
 use frond::eval::{GroundTruth, align_to_ground_truth};
 use frond::graph::neighbours::Neighbours;
@@ -47,9 +47,38 @@ fn main() -> Result<()> {
     let scene = Scene::open(dense)?;
     let segmentation = segment_scene(&scene, &SegmentOptions::default(), &NoProgress)?;
     let labels = Labels::automatic(&segmentation);
-    let (tree, run) = automatic_skeleton(&segmentation, &labels);
     let (similarity, _) = align_to_ground_truth(root, &dense.join("sparse"))
         .or_else(|_| align_to_ground_truth(root, dense))?;
+    if let Some(pot) = frond::branch::plant::pot_shape(&segmentation, &labels) {
+        let rim = similarity.apply(&pot.rim_centre);
+        println!(
+            "pot: rim centre {:.4} {:.4} {:.4}, radius {:.4} (true frame)",
+            rim.x,
+            rim.y,
+            rim.z,
+            pot.radius * similarity.scale
+        );
+    }
+    let flag = |name: &str| {
+        args.iter()
+            .position(|a| a == name)
+            .and_then(|k| args.get(k + 1))
+            .and_then(|v| v.parse::<f64>().ok())
+    };
+    let mut options = PlantSkeletonOptions::default();
+    if let Some(v) = flag("--tube-radius") {
+        options.tube.radius_spacings = v;
+    }
+    if let Some(v) = flag("--tube-width") {
+        options.tube.max_width_ratio = v;
+    }
+    if let Some(v) = flag("--tube-scales") {
+        options.tube.scales = v as u32;
+    }
+    if let Some(v) = flag("--tube-sheet") {
+        options.tube.max_sheet_share = v;
+    }
+    let (tree, run) = automatic_skeleton(&segmentation, &labels, &options);
     let positions: Vec<Point3<f64>> = segmentation
         .points
         .positions
@@ -75,14 +104,28 @@ fn main() -> Result<()> {
         100.0 * thin.centerline_coverage,
         NEAR * 1e3
     );
-    let input = skeleton_point_indices(&segmentation.foreground, &labels);
+    let candidates = skeleton_point_indices(&segmentation.foreground, &labels);
+    let input = if args.iter().any(|a| a == "--all-candidates") {
+        candidates
+    } else {
+        tube_point_indices(&segmentation, &labels, &candidates, &options.tube)
+    };
     let mut in_input = vec![false; positions.len()];
     for &i in &input {
         in_input[i as usize] = true;
     }
     let mut by_part: BTreeMap<&str, usize> = BTreeMap::new();
+    let mut by_source: BTreeMap<(String, &str), usize> = BTreeMap::new();
     for &i in &input {
-        *by_part.entry(part_name(part_of[i as usize])).or_default() += 1;
+        let i = i as usize;
+        *by_part.entry(part_name(part_of[i])).or_default() += 1;
+        let label = labels
+            .label_of_point(i)
+            .map_or("no segment".to_owned(), |l| format!("{l:?}"));
+        let source = format!("{:?} / {label}", segmentation.foreground.class[i]);
+        *by_source
+            .entry((source, part_name(part_of[i])))
+            .or_default() += 1;
     }
     println!(
         "skeleton input: {} of {} points; by true part within {} mm:",
@@ -95,6 +138,92 @@ fn main() -> Result<()> {
             "  {part:24} {n:7} ({:.1} %)",
             100.0 * *n as f64 / input.len().max(1) as f64
         );
+    }
+    {
+        let input_points: Vec<Point3<f64>> = input.iter().map(|&i| positions[i as usize]).collect();
+        let near =
+            Neighbours::new(input_points.iter().copied()).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        let mut gaps: BTreeMap<&str, Vec<f64>> = BTreeMap::new();
+        for (k, &i) in input.iter().enumerate() {
+            if let Some(g) = near.around(k, 2).into_iter().find(|f| f.index != k) {
+                gaps.entry(part_name(part_of[i as usize]))
+                    .or_default()
+                    .push(g.distance() * 1e3);
+            }
+        }
+        println!("skeleton input: nearest-neighbour distance (mm) 10/25/50/75/90 %");
+        for (part, mut g) in gaps {
+            g.sort_by(f64::total_cmp);
+            let q = |f: f64| g[((g.len() - 1) as f64 * f) as usize];
+            println!(
+                "  {part:24} {:.2} {:.2} {:.2} {:.2} {:.2}",
+                q(0.1),
+                q(0.25),
+                q(0.5),
+                q(0.75),
+                q(0.9)
+            );
+        }
+    }
+    println!("skeleton input by foreground class / segment label and true part:");
+    for ((source, part), n) in &by_source {
+        println!("  {source:28} {part:24} {n:7}");
+    }
+    // Where the skeleton input's points near no true surface lie: by distance from the true
+    // stem and petiole surfaces, and by height above the lowest true centreline point.
+    let axis_gap = |p: &Point3<f64>| {
+        truth
+            .branches
+            .iter()
+            .map(|b| {
+                b.centerline
+                    .windows(2)
+                    .map(|w| {
+                        frond::branch::spline::point_segment_distance(
+                            p,
+                            &Point3::from(w[0]),
+                            &Point3::from(w[1]),
+                        ) - b.mean_radius()
+                    })
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    let base_z = truth
+        .branches
+        .iter()
+        .flat_map(|b| b.centerline.iter().map(|c| c[2]))
+        .fold(f64::INFINITY, f64::min);
+    let mut far_input: BTreeMap<(&str, &str), usize> = BTreeMap::new();
+    for &i in &input {
+        let i = i as usize;
+        if part_of[i].is_some() {
+            continue;
+        }
+        let gap = axis_gap(&positions[i]);
+        let near = if gap < 0.005 {
+            "< 5 mm from a stem"
+        } else if gap < 0.02 {
+            "5-20 mm from a stem"
+        } else {
+            "> 20 mm from a stem"
+        };
+        let z = positions[i].z - base_z;
+        let height = if z < -0.01 {
+            "below the stem base"
+        } else if z < 0.02 {
+            "0-2 cm above the base"
+        } else {
+            "higher"
+        };
+        *far_input.entry((near, height)).or_default() += 1;
+    }
+    println!("skeleton input near no true surface:");
+    for ((near, height), n) in &far_input {
+        println!("  {near:22} {height:24} {n:7}");
+    }
+    if args.iter().any(|a| a == "--tube") {
+        tube_features(&positions, &input, &part_of, &labels, &axis_gap)?;
     }
     let on_stem: Vec<usize> = (0..positions.len())
         .filter(|&i| part_of[i] == Some(1))
@@ -123,10 +252,30 @@ fn main() -> Result<()> {
         );
     }
     println!(
-        "skeleton: {} branches ({:?})",
+        "skeleton: {} branches ({:?}), {:?}",
         tree.branches.len(),
-        run.error
+        run.error,
+        run.stats
     );
+    {
+        let mut records =
+            frond::branch::plant::skeleton_records(&tree, 0.002 / similarity.scale.max(1e-12), 2);
+        for branch in &mut records {
+            for c in &mut branch.centerline {
+                let p = similarity.apply(&Point3::from(*c));
+                *c = [p.x, p.y, p.z];
+            }
+            branch.radius_start *= similarity.scale;
+            branch.radius_end *= similarity.scale;
+        }
+        let petioles = frond::eval::geometry::petiole_ids(&truth.branches, &truth.leaves);
+        let scores =
+            frond::eval::geometry::skeleton_length_scores(&truth.branches, &petioles, &records);
+        println!(
+            "SCORE branch recall {:.3} petiole recall {:.3} precision {:.3} of {:.3} m",
+            scores.branch_recall, scores.petiole_recall, scores.precision, scores.predicted_length
+        );
+    }
     // The thin-organ sweep's points come after the fused ones (densify.json says how many).
     let fused_count = std::fs::read_to_string(dense.join("densify.json"))
         .ok()
@@ -257,5 +406,82 @@ fn main() -> Result<()> {
     }
     image.save(out)?;
     println!("wrote {out}");
+    Ok(())
+}
+
+/// Deciles of candidate tube features of the skeleton input, by what the points truly are.
+fn tube_features(
+    positions: &[Point3<f64>],
+    input: &[u32],
+    part_of: &[Option<i64>],
+    labels: &Labels,
+    axis_gap: &dyn Fn(&Point3<f64>) -> f64,
+) -> Result<()> {
+    use frond::graph::shape::Shape;
+    use frond::segment::SegmentLabel;
+    let all = Neighbours::new(positions.iter().copied()).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let mut nearest: Vec<f64> = (0..positions.len())
+        .step_by(7)
+        .filter_map(|i| {
+            all.around(i, 2)
+                .into_iter()
+                .find(|n| n.index != i)
+                .map(|n| n.distance())
+        })
+        .collect();
+    nearest.sort_by(f64::total_cmp);
+    let spacing = nearest[nearest.len() / 2];
+    println!("median spacing {:.2} mm", spacing * 1e3);
+    for scale in [6.0, 12.0, 20.0] {
+        let radius = scale * spacing;
+        let mut features: BTreeMap<&str, Vec<(f64, f64)>> = BTreeMap::new();
+        for &i in input {
+            let i = i as usize;
+            let kind = match part_of[i] {
+                Some(0) => "leaf",
+                Some(1) => "stem",
+                Some(2) => "pot",
+                Some(_) => "other",
+                None if axis_gap(&positions[i]) < 0.005 => "halo < 5 mm",
+                None => "far",
+            };
+            let around = all.within_radius(&positions[i], radius);
+            let leafy = around
+                .iter()
+                .filter(|n| labels.label_of_point(n.index) == Some(SegmentLabel::Leaf))
+                .count() as f64
+                / around.len().max(1) as f64;
+            let shape = Shape::of(around.iter().map(|n| positions[n.index]));
+            features
+                .entry(kind)
+                .or_default()
+                .push((shape.width_ratio(), leafy));
+        }
+        println!(
+            "radius {scale} spacings ({:.1} mm): width ratio | leaf share, 10/25/50/75/90 %",
+            radius * 1e3
+        );
+        for (kind, mut values) in features {
+            let q = |v: &[f64], f: f64| v[((v.len() - 1) as f64 * f) as usize];
+            let mut a: Vec<f64> = values.iter().map(|v| v.0).collect();
+            a.sort_by(f64::total_cmp);
+            values.sort_by(|x, y| x.1.total_cmp(&y.1));
+            let b: Vec<f64> = values.iter().map(|v| v.1).collect();
+            println!(
+                "  {kind:12} {:6} | {:.2} {:.2} {:.2} {:.2} {:.2} | {:.2} {:.2} {:.2} {:.2} {:.2}",
+                a.len(),
+                q(&a, 0.1),
+                q(&a, 0.25),
+                q(&a, 0.5),
+                q(&a, 0.75),
+                q(&a, 0.9),
+                q(&b, 0.1),
+                q(&b, 0.25),
+                q(&b, 0.5),
+                q(&b, 0.75),
+                q(&b, 0.9)
+            );
+        }
+    }
     Ok(())
 }

@@ -3,11 +3,13 @@
 //! [`crate::eval`]) and branch meshes for export. Takes the segmentation and its labels;
 //! returns a [`BranchTree`], skeleton records and model branches.
 
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::skeleton::{SkeletonError, SkeletonOptions, SkeletonStats, automatic_skeleton};
 use super::{BranchTree, CylinderMeshing};
+use crate::graph::neighbours::Neighbours;
+use crate::graph::shape::Shape;
 use crate::model::ModelBranch;
 use crate::segment::foreground::{Foreground, PointClass};
 use crate::segment::{Labels, SegmentLabel, Segmentation};
@@ -26,28 +28,383 @@ pub fn skeleton_point_indices(foreground: &Foreground, labels: &Labels) -> Vec<u
         .collect()
 }
 
-/// The points a skeleton is built from (see [`skeleton_point_indices`]).
-pub fn skeleton_points(segmentation: &Segmentation, labels: &Labels) -> Vec<Point3<f64>> {
+/// Which candidate points look like part of a thin tube from their surroundings, measured
+/// among all the plant's points (not only the candidates) within a ball of
+/// `radius_spacings` median point spacings. From photos the candidates also hold leaf edges,
+/// the stereo halo beside leaves, and pot: a petiole's ball holds a line of points (principal
+/// width ratio `√(λ₂/λ₁)` small) and few leaf or pot points, while a leaf edge's holds the
+/// leaf's sheet and a pot's holds the pot.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct TubeTest {
+    /// Ball radius in median point spacings.
+    pub radius_spacings: f64,
+    /// Largest principal width ratio `√(λ₂/λ₁)` of the ball.
+    pub max_width_ratio: f64,
+    /// Balls of `radius_spacings` times 1, 2, 4, …: a point passes when the width ratio of
+    /// any of them is small (a thick stem looks like a line only in a ball several times its
+    /// radius).
+    pub scales: u32,
+    /// Largest share of the ball's points in segments labelled leaf or pot.
+    pub max_sheet_share: f64,
+}
+
+impl Default for TubeTest {
+    fn default() -> Self {
+        Self {
+            radius_spacings: 12.0,
+            max_width_ratio: 0.5,
+            scales: 2,
+            max_sheet_share: 0.3,
+        }
+    }
+}
+
+/// Median distance from a point to its nearest neighbour (over a stride of at most about
+/// 20,000 points); `None` for fewer than two points.
+fn median_spacing(neighbours: &Neighbours) -> Option<f64> {
+    let n = neighbours.len();
+    let stride = (n / 20_000).max(1);
+    let mut nearest: Vec<f64> = (0..n)
+        .step_by(stride)
+        .filter_map(|i| {
+            neighbours
+                .around(i, 2)
+                .into_iter()
+                .find(|found| found.index != i)
+                .map(|found| found.distance())
+        })
+        .filter(|d| d.is_finite())
+        .collect();
+    if nearest.is_empty() {
+        return None;
+    }
+    nearest.sort_by(f64::total_cmp);
+    Some(nearest[nearest.len() / 2])
+}
+
+/// The candidates that pass the [`TubeTest`], in their order. All candidates pass when the
+/// spacing cannot be measured (fewer than two points).
+pub fn tube_point_indices(
+    segmentation: &Segmentation,
+    labels: &Labels,
+    candidates: &[u32],
+    test: &TubeTest,
+) -> Vec<u32> {
     let positions = &segmentation.points.positions;
-    skeleton_point_indices(&segmentation.foreground, labels)
+    let Ok(neighbours) = Neighbours::new(positions.iter().copied()) else {
+        return candidates.to_vec();
+    };
+    let Some(spacing) = median_spacing(&neighbours) else {
+        return candidates.to_vec();
+    };
+    let radius = test.radius_spacings * spacing;
+    candidates
+        .iter()
+        .copied()
+        .filter(|&i| {
+            let around = neighbours.within_radius(&positions[i as usize], radius);
+            let sheet = around
+                .iter()
+                .filter(|found| {
+                    matches!(
+                        labels.label_of_point(found.index),
+                        Some(SegmentLabel::Leaf | SegmentLabel::Pot)
+                    )
+                })
+                .count();
+            if sheet as f64 > test.max_sheet_share * around.len() as f64 {
+                return false;
+            }
+            let centre = positions[i as usize];
+            (0..test.scales.max(1)).any(|scale| {
+                let ball = radius * f64::from(1u32 << scale.min(16));
+                let shape = if scale == 0 {
+                    Shape::of(around.iter().map(|found| positions[found.index]))
+                } else {
+                    let wider = neighbours.within_radius(&centre, ball);
+                    Shape::of(wider.iter().map(|found| positions[found.index]))
+                };
+                shape.width_ratio() <= test.max_width_ratio
+            })
+        })
+        .collect()
+}
+
+/// The points a skeleton is built from: the candidates of [`skeleton_point_indices`] that
+/// pass the [`TubeTest`].
+pub fn skeleton_points(
+    segmentation: &Segmentation,
+    labels: &Labels,
+    test: &TubeTest,
+) -> Vec<Point3<f64>> {
+    let positions = &segmentation.points.positions;
+    let candidates = skeleton_point_indices(&segmentation.foreground, labels);
+    tube_point_indices(segmentation, labels, &candidates, test)
         .into_iter()
         .map(|i| positions[i as usize])
         .collect()
 }
 
-/// The automatic skeleton of a plant under the given labels.
+/// Options of a plant's automatic skeleton: which points may carry a branch and how the
+/// level-set skeleton is built from them.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct PlantSkeletonOptions {
+    pub tube: TubeTest,
+    pub skeleton: SkeletonOptions,
+}
+
+/// The pot as far as the skeleton needs it: its vertical axis, rim and radius.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PotShape {
+    /// A point on the pot's axis at the height of its rim (the soil line).
+    pub rim_centre: Point3<f64>,
+    /// Median distance of the pot's points from its axis.
+    pub radius: f64,
+}
+
+/// The pot of the labels, when at least [`MIN_POT_POINTS`] points are labelled pot: its axis
+/// through the mean of its points across the up direction (an orbit sees its wall all round),
+/// its rim at the 95th percentile of their heights.
+pub fn pot_shape(segmentation: &Segmentation, labels: &Labels) -> Option<PotShape> {
+    let foreground = &segmentation.foreground;
+    let up = foreground.up;
+    let centre = foreground.plant_center;
+    let positions = &segmentation.points.positions;
+    let pot: Vec<Point3<f64>> = (0..positions.len())
+        .filter(|&i| labels.label_of_point(i) == Some(SegmentLabel::Pot))
+        .map(|i| positions[i])
+        .collect();
+    if pot.len() < MIN_POT_POINTS {
+        return None;
+    }
+    let across = |p: &Point3<f64>| {
+        let d = p - centre;
+        d - up * up.dot(&d)
+    };
+    // The axis: a least-squares circle through the points across the up direction (Kåsa's
+    // fit, which needs only an arc of the wall: one side of a pot may hold far more points
+    // than the other), or their mean where the circle is degenerate or implausible.
+    let mean = pot.iter().fold(Vector3::zeros(), |a, p| a + across(p)) / pot.len() as f64;
+    let u = crate::util::geometry::any_perpendicular(&up);
+    let v = up.cross(&u);
+    let mut heights: Vec<f64> = pot.iter().map(|p| up.dot(&(p - centre))).collect();
+    heights.sort_by(f64::total_cmp);
+    let low = heights[(heights.len() - 1) * 5 / 100];
+    let rim = heights[(heights.len() - 1) * 95 / 100];
+    // The wall below the rim: the soil and whatever leans over the rim stay out.
+    let wall_top = low + 0.7 * (rim - low);
+    let band_height = ((wall_top - low) / WALL_BANDS as f64).max(1e-12);
+    // Voters: every point of the plant's foreground at the wall's heights (labels often
+    // give only pieces of the wall; what else hangs there is outvoted by the wall).
+    let planar: Vec<(f64, f64, usize)> = (0..positions.len())
+        .filter(|&i| {
+            matches!(
+                foreground.class[i],
+                crate::segment::foreground::PointClass::Plant
+                    | crate::segment::foreground::PointClass::Stem
+            )
+        })
+        .map(|i| &positions[i])
+        .filter_map(|p| {
+            let height = up.dot(&(p - centre));
+            if height < low || height > wall_top {
+                return None;
+            }
+            let d = across(p) - mean;
+            let band = (((height - low) / band_height) as usize).min(WALL_BANDS - 1);
+            Some((d.dot(&u), d.dot(&v), band))
+        })
+        .collect();
+    let offset = robust_circle_centre(&planar).map_or(mean, |(x, y)| mean + u * x + v * y);
+    // (The median over all pot points: the junk in them lies off the wall.)
+    let mut radii: Vec<f64> = pot.iter().map(|p| (across(p) - offset).norm()).collect();
+    radii.sort_by(f64::total_cmp);
+    Some(PotShape {
+        rim_centre: centre + offset + up * rim,
+        radius: radii[radii.len() / 2],
+    })
+}
+
+/// Height bands of a pot's wall fitted together ([`banded_circle_centre`]).
+const WALL_BANDS: usize = 5;
+
+/// The common centre of concentric circles through planar points in height bands (a tapered
+/// pot's wall: one radius per band): least squares of `x² + y² + D x + E y + F_b = 0`, Kåsa's
+/// algebraic circle fit with one `F` per band. Points are `(x, y, band)`. `None` without enough
+/// points to fix the centre (collinear points, or fewer than three in all).
+fn banded_circle_centre(points: &[(f64, f64, usize)]) -> Option<(f64, f64)> {
+    let unknowns = 2 + WALL_BANDS;
+    let mut normal = nalgebra::DMatrix::<f64>::zeros(unknowns, unknowns);
+    let mut rhs = nalgebra::DVector::<f64>::zeros(unknowns);
+    let mut in_band = [0usize; WALL_BANDS];
+    for &(x, y, band) in points {
+        let band = band.min(WALL_BANDS - 1);
+        in_band[band] += 1;
+        let mut row = nalgebra::DVector::<f64>::zeros(unknowns);
+        row[0] = x;
+        row[1] = y;
+        row[2 + band] = 1.0;
+        normal += &row * row.transpose();
+        rhs -= &row * (x * x + y * y);
+    }
+    if points.len() < 3 {
+        return None;
+    }
+    // A band without points leaves its unknown free: pin it to zero.
+    for (band, &count) in in_band.iter().enumerate() {
+        if count == 0 {
+            normal[(2 + band, 2 + band)] = 1.0;
+        }
+    }
+    let solution = normal.lu().solve(&rhs)?;
+    let (cx, cy) = (-0.5 * solution[0], -0.5 * solution[1]);
+    (cx.is_finite() && cy.is_finite()).then_some((cx, cy))
+}
+
+/// The centre of a pot's wall among outliers (floor, soil, pieces of plant taken for pot),
+/// from points `(x, y, band)`: a Hough vote over a grid of centres (61 × 61 over the points'
+/// bounding box widened by half its size each way), each scoring, per band, the most
+/// populated ring of width 1/100 of the box (two adjacent bins) around it; then the banded
+/// least-squares fit ([`banded_circle_centre`]) to the points on the winning rings, kept
+/// where it stays within two grid steps of the vote. `None` without points or extent.
+fn robust_circle_centre(points: &[(f64, f64, usize)]) -> Option<(f64, f64)> {
+    const GRID: usize = 61;
+    const RING_BINS: usize = 200;
+    const MAX_VOTERS: usize = 2000;
+    let (mut min, mut max) = (
+        (f64::INFINITY, f64::INFINITY),
+        (f64::NEG_INFINITY, f64::NEG_INFINITY),
+    );
+    for p in points {
+        min = (min.0.min(p.0), min.1.min(p.1));
+        max = (max.0.max(p.0), max.1.max(p.1));
+    }
+    let size = (max.0 - min.0).max(max.1 - min.1);
+    if !size.is_finite() || size <= 0.0 {
+        return None;
+    }
+    let stride = points.len().div_ceil(MAX_VOTERS).max(1);
+    let voters: Vec<&(f64, f64, usize)> = points.iter().step_by(stride).collect();
+    let step = 2.0 * size / (GRID - 1) as f64;
+    let ring = size / 100.0;
+    let origin = (min.0 - 0.5 * size, min.1 - 0.5 * size);
+    let mut histogram = vec![0u32; WALL_BANDS * RING_BINS];
+    // (score, centre, best ring per band)
+    let mut best: Option<(u32, (f64, f64), [usize; WALL_BANDS])> = None;
+    for gx in 0..GRID {
+        for gy in 0..GRID {
+            let centre = (origin.0 + gx as f64 * step, origin.1 + gy as f64 * step);
+            histogram.iter_mut().for_each(|h| *h = 0);
+            for p in &voters {
+                let bin = ((p.0 - centre.0).hypot(p.1 - centre.1) / ring) as usize;
+                if bin < RING_BINS {
+                    histogram[p.2.min(WALL_BANDS - 1) * RING_BINS + bin] += 1;
+                }
+            }
+            let mut score = 0;
+            let mut rings = [0usize; WALL_BANDS];
+            for (band, ring_of_band) in rings.iter_mut().enumerate() {
+                let row = &histogram[band * RING_BINS..(band + 1) * RING_BINS];
+                let (bin, count) = row
+                    .windows(2)
+                    .enumerate()
+                    .map(|(k, w)| (k, w[0] + w[1]))
+                    .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+                    .unwrap_or((0, 0));
+                score += count;
+                *ring_of_band = bin;
+            }
+            if best.is_none_or(|b| score > b.0) {
+                best = Some((score, centre, rings));
+            }
+        }
+    }
+    let (_, voted, rings) = best?;
+    let on_rings: Vec<(f64, f64, usize)> = points
+        .iter()
+        .filter(|p| {
+            let distance = (p.0 - voted.0).hypot(p.1 - voted.1) / ring;
+            let low = rings[p.2.min(WALL_BANDS - 1)] as f64;
+            distance >= low - 1.0 && distance < low + 3.0
+        })
+        .copied()
+        .collect();
+    Some(match banded_circle_centre(&on_rings) {
+        Some(fitted) if (fitted.0 - voted.0).hypot(fitted.1 - voted.1) <= 2.0 * step => fitted,
+        _ => voted,
+    })
+}
+
+/// Where the plant leaves the soil: on its vertical axis at the soil line. With a pot, the
+/// centre of its rim ([`pot_shape`]). Without one, the axis passes through the point the
+/// cameras look at and the soil line is the lowest of the skeleton points in the quarter
+/// nearest that axis; the cameras' point itself when there are none.
+pub fn plant_base(
+    segmentation: &Segmentation,
+    pot: Option<&PotShape>,
+    skeleton_points: &[Point3<f64>],
+) -> Point3<f64> {
+    if let Some(pot) = pot {
+        return pot.rim_centre;
+    }
+    let foreground = &segmentation.foreground;
+    let up = foreground.up;
+    let centre = foreground.plant_center;
+    let mut near: Vec<(f64, f64)> = skeleton_points
+        .iter()
+        .map(|p| {
+            let d = p - centre;
+            ((d - up * up.dot(&d)).norm(), up.dot(&d))
+        })
+        .collect();
+    if near.is_empty() {
+        return centre;
+    }
+    near.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let lowest = near[..near.len().div_ceil(4)]
+        .iter()
+        .map(|n| n.1)
+        .fold(f64::INFINITY, f64::min);
+    centre + up * lowest
+}
+
+/// A pot needs this many points to set the plant's base.
+pub const MIN_POT_POINTS: usize = 50;
+
+/// Whether a point is soil, floor or pot rather than plant: below the plant's base, or, with
+/// a pot, on its rim (beyond 0.8 of its radius from its axis and less than a tenth of its
+/// radius above the rim).
+pub fn below_the_plant(
+    p: &Point3<f64>,
+    up: &Vector3<f64>,
+    base: &Point3<f64>,
+    pot: Option<&PotShape>,
+) -> bool {
+    let d = p - base;
+    let height = up.dot(&d);
+    if height < 0.0 {
+        return true;
+    }
+    pot.is_some_and(|pot| {
+        let across = (d - up * height).norm();
+        across > 0.8 * pot.radius && height < 0.1 * pot.radius
+    })
+}
+
+/// The automatic skeleton of a plant under the given labels: built from the points that pass
+/// the [`TubeTest`], rooted at the [`plant_base`]; soil, floor and pot rim
+/// ([`below_the_plant`]) never become branches.
 pub fn automatic_plant_skeleton(
     segmentation: &Segmentation,
     labels: &Labels,
-    options: &SkeletonOptions,
+    options: &PlantSkeletonOptions,
 ) -> Result<(BranchTree, SkeletonStats), SkeletonError> {
-    let foreground = &segmentation.foreground;
-    automatic_skeleton(
-        &skeleton_points(segmentation, labels),
-        &foreground.up,
-        &foreground.plant_center,
-        options,
-    )
+    let up = segmentation.foreground.up;
+    let mut points = skeleton_points(segmentation, labels, &options.tube);
+    let pot = pot_shape(segmentation, labels);
+    let base = plant_base(segmentation, pot.as_ref(), &points);
+    points.retain(|p| !below_the_plant(p, &up, &base, pot.as_ref()));
+    automatic_skeleton(&points, &up, &base, &options.skeleton)
 }
 
 /// One branch as written to `skeleton.json` and to a synthetic dataset's `gt/branches.json`
@@ -217,4 +574,39 @@ pub fn model_branches(tree: &BranchTree) -> Vec<ModelBranch> {
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_tapered_wall_is_centred_from_a_third_of_its_arc_among_outliers() {
+        let (cx, cy) = (0.3, -0.2);
+        let mut rng = crate::util::rng::Rng::seed_from(5);
+        // A third of a cone's wall, radius 0.08 at the bottom band to 0.096 at the top.
+        let mut points: Vec<(f64, f64, usize)> = (0..600)
+            .map(|k| {
+                let band = k % WALL_BANDS;
+                let angle = rng.range(0.2, 2.3);
+                let radius = (0.08 + 0.004 * band as f64) * (1.0 + 0.01 * rng.range(-1.0, 1.0));
+                (cx + radius * angle.cos(), cy + radius * angle.sin(), band)
+            })
+            .collect();
+        let exact = banded_circle_centre(&points).expect("a centre");
+        assert!((exact.0 - cx).hypot(exact.1 - cy) < 0.002, "{exact:?}");
+        // A fifth as many outliers scattered inside and beyond the wall.
+        for k in 0..120 {
+            points.push((
+                cx + rng.range(-0.3, 0.3),
+                cy + rng.range(-0.3, 0.3),
+                k % WALL_BANDS,
+            ));
+        }
+        let robust = robust_circle_centre(&points).expect("a centre");
+        assert!((robust.0 - cx).hypot(robust.1 - cy) < 0.005, "{robust:?}");
+        // Collinear points fix no centre.
+        let line: Vec<(f64, f64, usize)> = (0..10).map(|k| (k as f64, 2.0 * k as f64, 0)).collect();
+        assert_eq!(banded_circle_centre(&line), None);
+    }
 }

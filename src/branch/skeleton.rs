@@ -69,6 +69,9 @@ pub struct SkeletonStats {
     pub bases_reanchored: usize,
     /// Branches found in points no other branch explains ([`recover_missed_tubes`]).
     pub branches_recovered: usize,
+    /// Pieces of tube out of the kNN graph's reach, bridged to the tree ([`bridge_pieces`]).
+    #[serde(default)]
+    pub pieces_bridged: usize,
 }
 
 /// Why no skeleton could be built.
@@ -96,13 +99,60 @@ struct Node {
 }
 
 /// Builds a branch tree from non-leaf plant points (stems, petioles, twigs).
-/// `up` is the plant's up direction and `axis_point` a point on its vertical axis.
+/// `up` is the plant's up direction and `root` the plant's base: a point on its vertical axis
+/// at the soil line. The tree grows from the lowest points near that axis; where they do not
+/// reach down to `root` (a stem hidden by leaves or the pot), the stem is extended straight to
+/// it. Pieces of tube the kNN graph cannot join (petioles whose lower parts the photos never
+/// show) get their own skeletons, bridged to the tree ([`bridge_pieces`]).
 pub fn automatic_skeleton(
+    points: &[Point3<f64>],
+    up: &Vector3<f64>,
+    root: &Point3<f64>,
+    options: &SkeletonOptions,
+) -> Result<(BranchTree, SkeletonStats), SkeletonError> {
+    let connected = connected_skeleton(points, up, root, options, Role::Plant)?;
+    let mut branches = connected.tree.branches;
+    let mut stats = connected.stats;
+    stats.pieces_bridged = bridge_pieces(
+        &mut branches,
+        points,
+        &connected.pieces,
+        up,
+        root,
+        options,
+        stats.level_width,
+    );
+    stats.branches = branches.len();
+    Ok((BranchTree { branches }, stats))
+}
+
+/// The skeleton of the kNN-connected part of the points around the root, and the point groups
+/// (indices) it could not join.
+struct Connected {
+    tree: BranchTree,
+    stats: SkeletonStats,
+    pieces: Vec<Vec<usize>>,
+}
+
+/// What a level-set skeleton is built for.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Role {
+    /// The whole plant: the root is the lowest point near the axis, and the stem is drawn on
+    /// to the plant's base when they are more than a level width apart.
+    Plant,
+    /// A piece of tube to be bridged to the plant: the root is its point nearest the base.
+    Piece,
+}
+
+/// The level-set skeleton of the component holding the root and the components joined to it
+/// across small gaps (see the module docs).
+fn connected_skeleton(
     points: &[Point3<f64>],
     up: &Vector3<f64>,
     axis_point: &Point3<f64>,
     options: &SkeletonOptions,
-) -> Result<(BranchTree, SkeletonStats), SkeletonError> {
+    role: Role,
+) -> Result<Connected, SkeletonError> {
     let n = points.len();
     let k = options.neighbours.max(2);
     if n < options.min_component_points.max(k + 1) {
@@ -171,7 +221,7 @@ pub fn automatic_skeleton(
     }
 
     // Root: in the largest component (the others are joined to it), the lowest point among
-    // those horizontally nearest the axis.
+    // those horizontally nearest the axis (for a piece, its point nearest the base).
     let horizontal = |p: &Point3<f64>| {
         let d = p - axis_point;
         (d - up * up.dot(&d)).norm()
@@ -181,16 +231,29 @@ pub fn automatic_skeleton(
     let mut by_axis: Vec<f64> = candidates.iter().map(|&i| horizontal(&points[i])).collect();
     by_axis.sort_by(f64::total_cmp);
     let near_axis = by_axis[(by_axis.len() - 1) / 4];
-    let root = candidates
-        .iter()
-        .copied()
-        .filter(|&i| horizontal(&points[i]) <= near_axis)
-        .min_by(|&a, &b| {
-            height(&points[a])
-                .total_cmp(&height(&points[b]))
-                .then(a.cmp(&b))
-        })
-        .unwrap_or(candidates[0]);
+    let root = match role {
+        Role::Plant => candidates
+            .iter()
+            .copied()
+            .filter(|&i| horizontal(&points[i]) <= near_axis)
+            .min_by(|&a, &b| {
+                height(&points[a])
+                    .total_cmp(&height(&points[b]))
+                    .then(a.cmp(&b))
+            })
+            .unwrap_or(candidates[0]),
+        // A piece grows from its end nearest the plant's base.
+        Role::Piece => candidates
+            .iter()
+            .copied()
+            .min_by(|&a, &b| {
+                (points[a] - axis_point)
+                    .norm()
+                    .total_cmp(&(points[b] - axis_point).norm())
+                    .then(a.cmp(&b))
+            })
+            .unwrap_or(candidates[0]),
+    };
 
     // Join the other components to the connected part across small gaps, nearest first.
     let mut connected = vec![false; n];
@@ -373,6 +436,12 @@ pub fn automatic_skeleton(
             parent_fraction = Some(anchor.fraction);
             stats.bases_reanchored += 1;
         }
+        if parent.is_none()
+            && role == Role::Plant
+            && (nodes[chain[0]].centroid - axis_point).norm() > level_width
+        {
+            attachment_point = Some(*axis_point);
+        }
         let mut polyline: Vec<Point3<f64>> = Vec::with_capacity(chain.len() + 1);
         polyline.extend(attachment_point);
         polyline.extend(smooth(
@@ -438,7 +507,116 @@ pub fn automatic_skeleton(
         },
     );
     stats.branches = branches.len();
-    Ok((BranchTree { branches }, stats))
+    Ok(Connected {
+        tree: BranchTree { branches },
+        stats,
+        pieces: pending.into_iter().map(|g| groups[g].clone()).collect(),
+    })
+}
+
+/// Pieces of tube the kNN graph could not join to the tree (a petiole seen only near its
+/// leaf, a branch behind foliage) each get their own level-set skeleton, rooted at their end
+/// nearest the plant's base, whose main branch is then extended straight back to the tree:
+/// to the point of an existing branch axis (or the root) that is cheapest to reach, as cost
+/// the bridge's length times `1 + 2 (1 − cos θ)`, θ its angle to the piece's own backward
+/// direction (the chord over its first four level widths), among points within 45° of that
+/// direction and within three times the piece's main-branch length. Pieces are taken largest
+/// first, so later ones may attach to earlier ones; a piece shorter than the shortest kept
+/// branch or with no such point is left out. Returns how many pieces were added.
+fn bridge_pieces(
+    branches: &mut Vec<Branch>,
+    points: &[Point3<f64>],
+    pieces: &[Vec<usize>],
+    up: &Vector3<f64>,
+    root: &Point3<f64>,
+    options: &SkeletonOptions,
+    level_width: f64,
+) -> usize {
+    const MAX_ANGLE_DEG: f64 = 40.0;
+    const ANGLE_PENALTY: f64 = 8.0;
+    const REACH_LENGTHS: f64 = 3.0;
+    if branches.is_empty() {
+        return 0;
+    }
+    let cos_max = MAX_ANGLE_DEG.to_radians().cos();
+    let mut pieces: Vec<&Vec<usize>> = pieces.iter().collect();
+    pieces.sort_by_key(|g| (Reverse(g.len()), g[0]));
+    let mut bridged = 0;
+    for piece in pieces {
+        let piece_points: Vec<Point3<f64>> = piece.iter().map(|&i| points[i]).collect();
+        let Ok(sub) = connected_skeleton(&piece_points, up, root, options, Role::Piece) else {
+            continue;
+        };
+        let mut sub_branches = sub.tree.branches;
+        let Some(main) = sub_branches.first() else {
+            continue;
+        };
+        let main_axis = &main.cylinder.skeleton;
+        let length = main_axis.length();
+        let min_length = options.min_branch_levels * level_width;
+        if length < min_length {
+            continue;
+        }
+        let origin = main_axis.point_at_fraction(0.0);
+        let back_fraction = (4.0 * sub.stats.level_width / length).min(1.0);
+        let Some(backward) =
+            (origin - main_axis.point_at_fraction(back_fraction)).try_normalize(1e-12)
+        else {
+            continue;
+        };
+        let reach = REACH_LENGTHS * length;
+        let mut best: Option<(f64, u32, f64, Point3<f64>)> = None;
+        for branch in branches.iter() {
+            let samples = branch.cylinder.skeleton.sample_by_arc_length(128);
+            let last = (samples.len().max(2) - 1) as f64;
+            for (k, (point, _)) in samples.iter().enumerate() {
+                let offset = point - origin;
+                let distance = offset.norm();
+                if distance > reach || distance < 1e-12 {
+                    continue;
+                }
+                let cos = offset.dot(&backward) / distance;
+                if cos < cos_max {
+                    continue;
+                }
+                let cost = distance * (1.0 + ANGLE_PENALTY * (1.0 - cos));
+                if best.is_none_or(|b| cost < b.0) {
+                    best = Some((cost, branch.id, k as f64 / last, *point));
+                }
+            }
+        }
+        let Some((_, parent, fraction, anchor)) = best else {
+            continue;
+        };
+        let mut control = vec![anchor];
+        control.extend(main_axis.control_points().iter().copied());
+        let Some(skeleton) = spline_through(&control) else {
+            continue;
+        };
+        let offset = branches.len() as u32;
+        let main = &mut sub_branches[0];
+        main.cylinder = GeneralizedCylinder::new(
+            skeleton,
+            main.cylinder.radius_start,
+            main.cylinder.radius_end,
+        );
+        main.parent = Some(parent);
+        main.parent_fraction = fraction;
+        for branch in &mut sub_branches {
+            branch.id += offset;
+        }
+        for k in 1..sub_branches.len() {
+            if let Some(p) = sub_branches[k].parent {
+                let start = sub_branches[k].cylinder.skeleton.point_at_fraction(0.0);
+                let parent_branch = &sub_branches[p as usize];
+                sub_branches[k].parent_fraction = attachment_fraction(parent_branch, &start);
+                sub_branches[k].parent = Some(p + offset);
+            }
+        }
+        branches.extend(sub_branches);
+        bridged += 1;
+    }
+    bridged
 }
 
 /// What [`recover_missed_tubes`] looks at.

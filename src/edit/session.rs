@@ -129,8 +129,11 @@ impl Session {
             branches: BranchTree::default(),
             initial_skeleton: SkeletonRun::default(),
         };
-        let (tree, run) =
-            crate::pipeline::automatic_skeleton(&session.segmentation, &session.labels);
+        let (tree, run) = crate::pipeline::automatic_skeleton(
+            &session.segmentation,
+            &session.labels,
+            &Default::default(),
+        );
         session.branches = tree;
         session.initial_skeleton = run;
         session

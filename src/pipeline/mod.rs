@@ -22,7 +22,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::branch::BranchTree;
 use crate::branch::attach::{Attachment, PosedKind, attach_leaves};
-use crate::branch::plant::{automatic_plant_skeleton, model_branches};
+use crate::branch::plant::{PlantSkeletonOptions, automatic_plant_skeleton, model_branches};
 use crate::branch::skeleton::SkeletonStats;
 use crate::leaf::{
     Boundaries, LeafError, LeafInput, LeafOptions, LeafReconstruction, LeafTimings, PlantContext,
@@ -290,16 +290,16 @@ pub struct SkeletonRun {
 pub fn automatic_skeleton(
     segmentation: &Segmentation,
     labels: &Labels,
+    options: &PlantSkeletonOptions,
 ) -> (BranchTree, SkeletonRun) {
     let clock = Instant::now();
-    let (tree, stats, error) =
-        match automatic_plant_skeleton(segmentation, labels, &Default::default()) {
-            Ok((tree, stats)) => (tree, Some(stats), None),
-            Err(e) => {
-                tracing::info!("no automatic skeleton: {e}");
-                (BranchTree::default(), None, Some(e.to_string()))
-            }
-        };
+    let (tree, stats, error) = match automatic_plant_skeleton(segmentation, labels, options) {
+        Ok((tree, stats)) => (tree, Some(stats), None),
+        Err(e) => {
+            tracing::info!("no automatic skeleton: {e}");
+            (BranchTree::default(), None, Some(e.to_string()))
+        }
+    };
     (
         tree,
         SkeletonRun {
@@ -773,6 +773,7 @@ pub fn write_automatic_segmentation(
 pub struct ReconstructOptions {
     pub segmentation: SegmentOptions,
     pub leaves: LeafOptions,
+    pub skeleton: PlantSkeletonOptions,
 }
 
 /// What [`reconstruct`] returns: the report it wrote and the leaves it fitted.
@@ -793,7 +794,7 @@ pub fn reconstruct(
     let segmentation = segment_scene(scene, &options.segmentation, progress)?;
     progress.stage("automatic skeleton", 0);
     let labels = Labels::automatic(&segmentation);
-    let (branches, skeleton) = automatic_skeleton(&segmentation, &labels);
+    let (branches, skeleton) = automatic_skeleton(&segmentation, &labels, &options.skeleton);
     if let Some(error) = &skeleton.error {
         tracing::warn!("no automatic skeleton: {error}");
     }
