@@ -391,20 +391,135 @@ pub fn below_the_plant(
     })
 }
 
-/// The automatic skeleton of a plant under the given labels: built from the points that pass
-/// the [`TubeTest`], rooted at the [`plant_base`]; soil, floor and pot rim
-/// ([`below_the_plant`]) never become branches.
+/// The points a plant's skeleton is built from and where it is rooted: the points that pass
+/// the [`TubeTest`] and are not soil, floor or pot rim ([`below_the_plant`]), and the
+/// [`plant_base`].
+pub fn skeleton_input(
+    segmentation: &Segmentation,
+    labels: &Labels,
+    tube: &TubeTest,
+) -> (Vec<Point3<f64>>, Point3<f64>) {
+    let up = segmentation.foreground.up;
+    let mut points = skeleton_points(segmentation, labels, tube);
+    let pot = pot_shape(segmentation, labels);
+    let base = plant_base(segmentation, pot.as_ref(), &points);
+    points.retain(|p| !below_the_plant(p, &up, &base, pot.as_ref()));
+    (points, base)
+}
+
+/// The automatic skeleton of a plant under the given labels, from its [`skeleton_input`].
 pub fn automatic_plant_skeleton(
     segmentation: &Segmentation,
     labels: &Labels,
     options: &PlantSkeletonOptions,
 ) -> Result<(BranchTree, SkeletonStats), SkeletonError> {
-    let up = segmentation.foreground.up;
-    let mut points = skeleton_points(segmentation, labels, &options.tube);
-    let pot = pot_shape(segmentation, labels);
-    let base = plant_base(segmentation, pot.as_ref(), &points);
-    points.retain(|p| !below_the_plant(p, &up, &base, pot.as_ref()));
-    automatic_skeleton(&points, &up, &base, &options.skeleton)
+    let (points, base) = skeleton_input(segmentation, labels, &options.tube);
+    automatic_skeleton(
+        &points,
+        &segmentation.foreground.up,
+        &base,
+        &options.skeleton,
+    )
+}
+
+/// How much of a branch the points show: the length along which some point lies within the
+/// branch's radius plus a tolerance of its axis (observed), and the rest (bridged: drawn
+/// across an occlusion or a gap, or by hand where no point is).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BranchSupport {
+    pub id: u32,
+    /// World units, as the branch.
+    pub observed_length: f64,
+    pub bridged_length: f64,
+}
+
+impl BranchSupport {
+    /// Observed share of the branch's length (1 for a branch of no length).
+    pub fn observed_fraction(&self) -> f64 {
+        let total = self.observed_length + self.bridged_length;
+        if total > 0.0 {
+            self.observed_length / total
+        } else {
+            1.0
+        }
+    }
+}
+
+/// Support of every branch by the points (see [`BranchSupport`]): each axis is sampled about
+/// every `step`, a sample is observed when a point lies within the local radius plus
+/// `tolerance`, and each piece of axis between samples counts as its nearer sample does.
+pub fn branch_support(
+    tree: &BranchTree,
+    points: &[Point3<f64>],
+    step: f64,
+    tolerance: f64,
+) -> Vec<BranchSupport> {
+    let neighbours = Neighbours::new(points.iter().copied()).ok();
+    tree.branches
+        .iter()
+        .map(|branch| {
+            let cylinder = &branch.cylinder;
+            let length = cylinder.length();
+            let count = ((length / step.max(1e-12)).ceil() as usize).clamp(2, 4000);
+            let samples = cylinder.skeleton.sample_by_arc_length(count);
+            let last = (samples.len() - 1) as f64;
+            let observed: Vec<bool> = samples
+                .iter()
+                .enumerate()
+                .map(|(k, (p, _))| {
+                    let reach = cylinder.radius_at(k as f64 / last) + tolerance;
+                    neighbours
+                        .as_ref()
+                        .and_then(|n| n.nearest(p))
+                        .is_some_and(|found| found.distance() <= reach)
+                })
+                .collect();
+            let mut support = BranchSupport {
+                id: branch.id,
+                observed_length: 0.0,
+                bridged_length: 0.0,
+            };
+            for k in 1..samples.len() {
+                let piece = (samples[k].0 - samples[k - 1].0).norm();
+                for seen in [observed[k - 1], observed[k]] {
+                    if seen {
+                        support.observed_length += 0.5 * piece;
+                    } else {
+                        support.bridged_length += 0.5 * piece;
+                    }
+                }
+            }
+            support
+        })
+        .collect()
+}
+
+/// [`branch_support`] of a plant's branches by its [`skeleton_input`], sampled and tolerant
+/// by two median spacings of those points.
+pub fn plant_branch_support(
+    segmentation: &Segmentation,
+    labels: &Labels,
+    tree: &BranchTree,
+    tube: &TubeTest,
+) -> Vec<BranchSupport> {
+    let (points, _) = skeleton_input(segmentation, labels, tube);
+    let spacing = Neighbours::new(points.iter().copied())
+        .ok()
+        .and_then(|n| median_spacing(&n))
+        .unwrap_or(0.0);
+    if spacing <= 0.0 {
+        // No points: nothing is observed.
+        return branch_support(tree, &[], 1e-3 * plant_extent(tree).max(1e-9), 0.0);
+    }
+    branch_support(tree, &points, 2.0 * spacing, 2.0 * spacing)
+}
+
+/// The largest branch length of a tree (0 without branches).
+fn plant_extent(tree: &BranchTree) -> f64 {
+    tree.branches
+        .iter()
+        .map(|b| b.cylinder.length())
+        .fold(0.0, f64::max)
 }
 
 /// One branch as written to `skeleton.json` and to a synthetic dataset's `gt/branches.json`
@@ -428,6 +543,12 @@ pub struct SkeletonRecord {
     pub length: f64,
     /// Points along the skeleton about every `spacing` metres, for distance metrics.
     pub centerline: Vec<[f64; 3]>,
+    /// Length along which points show the branch ([`BranchSupport`]); absent in the truth.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub observed_length: Option<f64>,
+    /// Length drawn where no point is.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bridged_length: Option<f64>,
 }
 
 impl SkeletonRecord {
@@ -545,6 +666,8 @@ pub fn skeleton_records(
                     .iter()
                     .map(|(p, _)| as_array(p))
                     .collect(),
+                observed_length: None,
+                bridged_length: None,
             }
         })
         .collect()
@@ -608,5 +731,31 @@ mod tests {
         // Collinear points fix no centre.
         let line: Vec<(f64, f64, usize)> = (0..10).map(|k| (k as f64, 2.0 * k as f64, 0)).collect();
         assert_eq!(banded_circle_centre(&line), None);
+    }
+
+    #[test]
+    fn soil_floor_and_pot_rim_are_below_the_plant() {
+        let up = Vector3::z();
+        let base = Point3::new(0.0, 0.0, 0.12);
+        let pot = PotShape {
+            rim_centre: base,
+            radius: 0.09,
+        };
+        let below = |p: Point3<f64>| below_the_plant(&p, &up, &base, Some(&pot));
+        // Soil and floor.
+        assert!(below(Point3::new(0.01, 0.0, 0.11)));
+        assert!(below(Point3::new(0.3, 0.0, 0.0)));
+        // The rim, just above the soil line at the pot's radius.
+        assert!(below(Point3::new(0.0, 0.09, 0.125)));
+        // The stem just above the soil, and a leaf stalk above the rim.
+        assert!(!below(Point3::new(0.002, 0.0, 0.125)));
+        assert!(!below(Point3::new(0.09, 0.0, 0.2)));
+        // Without a pot only the height counts.
+        assert!(!below_the_plant(
+            &Point3::new(0.0, 0.09, 0.125),
+            &up,
+            &base,
+            None
+        ));
     }
 }

@@ -1575,6 +1575,79 @@ mod tests {
     }
 
     #[test]
+    fn a_petiole_seen_only_near_its_leaf_is_bridged_to_the_stem() {
+        let mut rng = Rng::seed_from(11);
+        let stem = [Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, 0.3)];
+        // The petiole leaves the stem at 0.2 m; only its outer 60 % has points (the photos
+        // never see its base behind the leaves).
+        let base = Point3::new(0.0, 0.0, 0.2);
+        let tip = Point3::new(0.2, 0.0, 0.35);
+        let seen_from = base + (tip - base) * 0.4;
+        let mut points = tube(&stem, 0.004, 10_000.0, &mut rng);
+        points.extend(tube(&[seen_from, tip], 0.002, 5_000.0, &mut rng));
+        // A piece of tube low down beside the plant, running across the way to the stem: no
+        // plausible bridge starts from it.
+        let stray = [
+            Point3::new(0.25, -0.05, 0.02),
+            Point3::new(0.25, 0.05, 0.02),
+        ];
+        points.extend(tube(&stray, 0.002, 5_000.0, &mut rng));
+        let (tree, stats) = skeleton_z_up(&points);
+        assert_eq!(stats.pieces_bridged, 1, "{stats:?}");
+        // The whole petiole is drawn, its hidden base straight back to the stem.
+        let coverage = best_coverage(&tree, &[base, tip], 0.01);
+        assert!(coverage > 0.9, "petiole coverage {coverage}");
+        let petiole = tree
+            .branches
+            .iter()
+            .max_by(|a, b| {
+                let near = |b: &Branch| b.cylinder.skeleton.distance_to(&tip);
+                near(b).total_cmp(&near(a))
+            })
+            .expect("branches");
+        assert_eq!(petiole.parent, Some(0));
+        let start = petiole.cylinder.skeleton.point_at_fraction(0.0);
+        assert!((start - base).norm() < 0.02, "petiole starts at {start:?}");
+        // Nothing is drawn along the stray piece.
+        let stray_coverage = best_coverage(&tree, &stray, 0.01);
+        assert!(stray_coverage < 0.2, "stray coverage {stray_coverage}");
+    }
+
+    #[test]
+    fn support_tells_observed_from_bridged_length() {
+        let mut rng = Rng::seed_from(2);
+        let axis = [Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, 0.4)];
+        let tree = BranchTree {
+            branches: vec![Branch {
+                id: 0,
+                parent: None,
+                parent_fraction: 0.0,
+                cylinder: GeneralizedCylinder::new(
+                    Spline::new(axis.to_vec()).expect("spline"),
+                    0.004,
+                    0.004,
+                ),
+                leaf_at_tip: false,
+            }],
+        };
+        // Points on the lower quarter only.
+        let points = tube(
+            &[axis[0], Point3::new(0.0, 0.0, 0.1)],
+            0.004,
+            10_000.0,
+            &mut rng,
+        );
+        let support = crate::branch::plant::branch_support(&tree, &points, 0.002, 0.002);
+        assert_eq!(support.len(), 1);
+        let s = support[0];
+        assert!((s.observed_length - 0.1).abs() < 0.01, "{s:?}");
+        assert!((s.bridged_length - 0.3).abs() < 0.01, "{s:?}");
+        assert!((s.observed_fraction() - 0.25).abs() < 0.03);
+        let none = crate::branch::plant::branch_support(&tree, &[], 0.002, 0.002);
+        assert_eq!(none[0].observed_length, 0.0);
+    }
+
+    #[test]
     fn degenerate_input_is_an_error() {
         let few = vec![Point3::new(0.0, 0.0, 0.0); 5];
         assert!(matches!(

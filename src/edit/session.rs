@@ -149,6 +149,17 @@ impl Session {
         &self.initial_skeleton
     }
 
+    /// How much of each branch the points show (observed vs bridged length), measured on the
+    /// points the automatic skeleton uses under the current labels.
+    pub fn branch_support(&self) -> Vec<crate::branch::plant::BranchSupport> {
+        crate::branch::plant::plant_branch_support(
+            &self.segmentation,
+            &self.labels,
+            &self.branches,
+            &self.initial_skeleton.options.tube,
+        )
+    }
+
     /// The camera of a photo, for strokes drawn in it.
     pub fn stroke_view(&self, image_id: ImageId) -> Result<StrokeView, EditError> {
         let view = self.view_index(image_id)?;

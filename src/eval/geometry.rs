@@ -272,6 +272,8 @@ mod tests {
             radius_end: 0.01,
             length: 0.49,
             centerline: (0..50).map(|k| [0.0, 0.0, k as f64 * 0.01]).collect(),
+            observed_length: None,
+            bridged_length: None,
         };
         let gt = vec![stem.clone()];
         let none = BTreeSet::new();
@@ -302,6 +304,8 @@ mod tests {
             radius_end: radius,
             length: 0.0,
             centerline: line,
+            observed_length: None,
+            bridged_length: None,
         }
     }
 

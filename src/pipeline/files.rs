@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{EditCount, PipelineError, PlantState, output_error};
 use crate::branch::BranchTree;
-use crate::branch::plant::{SkeletonFile, skeleton_records};
+use crate::branch::plant::{BranchSupport, SkeletonFile, skeleton_records};
 use crate::graph::points::PointIds;
 use crate::leaf::Boundaries;
 use crate::model::{segmentation_ply, write_segmentation_ply};
@@ -62,9 +62,19 @@ pub(super) fn read_versioned<T: serde::de::DeserializeOwned>(
 }
 
 /// `skeleton.json`: the branch tree as records with sampled centrelines.
-pub fn write_skeleton(branches: &BranchTree, out: &Path) -> Result<(), PipelineError> {
+pub fn write_skeleton(
+    branches: &BranchTree,
+    support: &[BranchSupport],
+    out: &Path,
+) -> Result<(), PipelineError> {
     let path = out.join(SKELETON_FILE);
-    let records = skeleton_records(branches, SKELETON_SPACING, SKELETON_MIN_SAMPLES);
+    let mut records = skeleton_records(branches, SKELETON_SPACING, SKELETON_MIN_SAMPLES);
+    for record in &mut records {
+        if let Some(s) = support.iter().find(|s| s.id == record.id) {
+            record.observed_length = Some(s.observed_length);
+            record.bridged_length = Some(s.bridged_length);
+        }
+    }
     write_atomic(&path, SkeletonFile::new(records).to_json().as_bytes())
         .map_err(|e| output_error(&path, e))
 }

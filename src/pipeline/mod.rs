@@ -22,7 +22,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::branch::BranchTree;
 use crate::branch::attach::{Attachment, PosedKind, attach_leaves};
-use crate::branch::plant::{PlantSkeletonOptions, automatic_plant_skeleton, model_branches};
+use crate::branch::plant::{
+    BranchSupport, PlantSkeletonOptions, automatic_plant_skeleton, model_branches,
+    plant_branch_support,
+};
 use crate::branch::skeleton::SkeletonStats;
 use crate::leaf::{
     Boundaries, LeafError, LeafInput, LeafOptions, LeafReconstruction, LeafTimings, PlantContext,
@@ -276,9 +279,37 @@ pub fn densify_workspace(
     Ok((report, dense.points().len()))
 }
 
+/// The branch support of a plant at a glance (see [`BranchSupport`]).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SupportSummary {
+    /// Branch length with points along it, world units.
+    pub observed_length: f64,
+    /// Branch length drawn where no point is (bridged across gaps and occlusions).
+    pub bridged_length: f64,
+    /// Branches of which less than half is observed: what to check first.
+    pub mostly_bridged: Vec<u32>,
+}
+
+impl SupportSummary {
+    pub fn new(support: &[BranchSupport]) -> Self {
+        Self {
+            observed_length: support.iter().map(|s| s.observed_length).sum(),
+            bridged_length: support.iter().map(|s| s.bridged_length).sum(),
+            mostly_bridged: support
+                .iter()
+                .filter(|s| s.observed_fraction() < 0.5)
+                .map(|s| s.id)
+                .collect(),
+        }
+    }
+}
+
 /// How the automatic skeleton of a plant came out.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct SkeletonRun {
+    /// The options it ran with (the branch support of later edits is measured on the same
+    /// points).
+    pub options: PlantSkeletonOptions,
     pub stats: Option<SkeletonStats>,
     /// Why there is none, when there is none.
     pub error: Option<String>,
@@ -303,6 +334,7 @@ pub fn automatic_skeleton(
     (
         tree,
         SkeletonRun {
+            options: *options,
             stats,
             error,
             seconds: clock.elapsed().as_secs_f64(),
@@ -599,6 +631,9 @@ pub struct ReconstructionReport {
     pub skeleton: Option<SkeletonStats>,
     /// Why there is no automatic skeleton, when there is none.
     pub skeleton_error: Option<String>,
+    /// How much of the branches the points show (per branch in `skeleton.json`).
+    #[serde(default)]
+    pub skeleton_support: SupportSummary,
     pub attachment: AttachmentRecord,
     pub template: Option<TemplateRecord>,
     pub skipped: Vec<SkippedLeaf>,
@@ -637,7 +672,13 @@ pub fn write_plant(
     out: &Path,
 ) -> Result<ReconstructionReport, PipelineError> {
     std::fs::create_dir_all(out).map_err(|e| output_error(out, e))?;
-    files::write_skeleton(state.branches, out)?;
+    let support = plant_branch_support(
+        state.segmentation,
+        state.labels,
+        state.branches,
+        &state.skeleton.options.tube,
+    );
+    files::write_skeleton(state.branches, &support, out)?;
     let AssembledPlant {
         model,
         attachment,
@@ -704,6 +745,7 @@ pub fn write_plant(
         },
         skeleton: state.skeleton.stats.clone(),
         skeleton_error: state.skeleton.error.clone(),
+        skeleton_support: SupportSummary::new(&support),
         attachment: AttachmentRecord::of(&attachment),
         template: leaves.template_source.and_then(|t| {
             Some(TemplateRecord {

@@ -312,6 +312,8 @@ mod tests {
                 radius_end: 0.01,
                 length: 0.0,
                 centerline: vec![[0.0, 0.0, 0.0], [0.0, 0.0, 0.3 + branch_extra]],
+                observed_length: None,
+                bridged_length: None,
             }],
         }
     }

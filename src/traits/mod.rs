@@ -826,6 +826,8 @@ mod tests {
             radius_end: 0.005,
             length: 0.0,
             centerline: line.to_vec(),
+            observed_length: None,
+            bridged_length: None,
         }
     }
 

@@ -139,6 +139,14 @@ enum Dialog {
 }
 
 /// The application state.
+/// Branch support measured for one state of the session (see `FrondApp::branches_ui`).
+struct SupportCache {
+    /// (history length, applied commands) when measured.
+    position: (usize, usize),
+    tree: frond::branch::BranchTree,
+    support: Vec<frond::branch::plant::BranchSupport>,
+}
+
 pub struct FrondApp {
     config: Option<ConfigDir>,
     recent: Vec<PathBuf>,
@@ -170,6 +178,9 @@ pub struct FrondApp {
     last_autosave: Instant,
     /// Recent UI build times (ms).
     frame_times: VecDeque<f32>,
+    /// Branch support shown in the branches tab, with the history position and tree it was
+    /// measured for (measuring takes a fraction of a second: not every frame).
+    support: Option<SupportCache>,
     /// Recent whole-frame CPU times reported by eframe (ms): UI, tessellation, the 3D
     /// panel's render and the window's paint, without waiting for vsync.
     paint_times: VecDeque<f32>,
@@ -240,6 +251,7 @@ impl FrondApp {
             autosave_interval: AUTOSAVE_INTERVAL,
             last_autosave: Instant::now(),
             frame_times: VecDeque::new(),
+            support: None,
             paint_times: VecDeque::new(),
             benchmark: None,
             fit_leaves_when_open: false,
@@ -1319,6 +1331,35 @@ impl FrondApp {
             return;
         };
         let tree = workspace.session.branches();
+        let (history, cursor) = workspace.session.history();
+        let position = (history.len(), cursor);
+        let fresh = self
+            .support
+            .as_ref()
+            .is_some_and(|c| c.position == position && c.tree == *tree);
+        if !fresh && !busy {
+            self.support = Some(SupportCache {
+                position,
+                tree: tree.clone(),
+                support: workspace.session.branch_support(),
+            });
+        }
+        let support = self.support.as_ref().filter(|c| c.tree == *tree);
+        if let Some(cache) = support {
+            let summary = frond::pipeline::SupportSummary::new(&cache.support);
+            let total = summary.observed_length + summary.bridged_length;
+            if total > 0.0 {
+                ui.label(format!(
+                    "Observed {:.0} % of the branch length; {} mostly bridged",
+                    100.0 * summary.observed_length / total,
+                    summary.mostly_bridged.len()
+                ))
+                .on_hover_text(
+                    "Observed: points lie along the branch. Bridged: drawn across a gap or \
+                     an occlusion where no point is; check those branches in the photos.",
+                );
+            }
+        }
         let initial = workspace.session.initial_skeleton();
         ui.label(format!("{} branches", tree.branches.len()));
         if let Some(error) = &initial.error {
@@ -1342,9 +1383,10 @@ impl FrondApp {
             .column(Column::auto().at_least(44.0))
             .column(Column::auto().at_least(64.0))
             .column(Column::auto().at_least(90.0))
+            .column(Column::auto().at_least(64.0))
             .column(Column::remainder())
             .header(20.0, |mut header| {
-                for title in ["Id", "Parent", "Length", "Radius", "Tip leaf"] {
+                for title in ["Id", "Parent", "Length", "Radius", "Observed", "Tip leaf"] {
                     header.col(|ui| {
                         ui.strong(title);
                     });
@@ -1368,6 +1410,25 @@ impl FrondApp {
                             branch.cylinder.radius_start * 1e3,
                             branch.cylinder.radius_end * 1e3
                         ));
+                    });
+                    row.col(|ui| {
+                        let observed = support
+                            .and_then(|c| c.support.iter().find(|s| s.id == branch.id))
+                            .map(|s| s.observed_fraction());
+                        match observed {
+                            Some(f) if f < 0.5 => {
+                                ui.colored_label(
+                                    ui.visuals().warn_fg_color,
+                                    format!("{:.0} %", 100.0 * f),
+                                );
+                            }
+                            Some(f) => {
+                                ui.label(format!("{:.0} %", 100.0 * f));
+                            }
+                            None => {
+                                ui.label("…");
+                            }
+                        }
                     });
                     row.col(|ui| {
                         ui.label(if branch.leaf_at_tip { "yes" } else { "" });
