@@ -48,6 +48,7 @@ fn main() -> Result<()> {
     let segmentation = segment_scene(&scene, &SegmentOptions::default(), &NoProgress)?;
     let labels = Labels::automatic(&segmentation);
     let (similarity, _) = align_to_ground_truth(root, &dense.join("sparse"))
+        .or_else(|_| align_to_ground_truth(root, &dense.join("sparse/0")))
         .or_else(|_| align_to_ground_truth(root, dense))?;
     if let Some(pot) = frond::branch::plant::pot_shape(&segmentation, &labels) {
         let rim = similarity.apply(&pot.rim_centre);
@@ -68,12 +69,6 @@ fn main() -> Result<()> {
     let mut options = PlantSkeletonOptions::default();
     if let Some(v) = flag("--tube-radius") {
         options.tube.radius_spacings = v;
-    }
-    if let Some(v) = flag("--tube-width") {
-        options.tube.max_width_ratio = v;
-    }
-    if let Some(v) = flag("--tube-scales") {
-        options.tube.scales = v as u32;
     }
     if let Some(v) = flag("--tube-sheet") {
         options.tube.max_sheet_share = v;

@@ -9,7 +9,6 @@ use serde::{Deserialize, Serialize};
 use super::skeleton::{SkeletonError, SkeletonOptions, SkeletonStats, automatic_skeleton};
 use super::{BranchTree, CylinderMeshing};
 use crate::graph::neighbours::Neighbours;
-use crate::graph::shape::Shape;
 use crate::model::ModelBranch;
 use crate::segment::foreground::{Foreground, PointClass};
 use crate::segment::{Labels, SegmentLabel, Segmentation};
@@ -28,22 +27,21 @@ pub fn skeleton_point_indices(foreground: &Foreground, labels: &Labels) -> Vec<u
         .collect()
 }
 
-/// Which candidate points look like part of a thin tube from their surroundings, measured
-/// among all the plant's points (not only the candidates) within a ball of
-/// `radius_spacings` median point spacings. From photos the candidates also hold leaf edges,
-/// the stereo halo beside leaves, and pot: a petiole's ball holds a line of points (principal
-/// width ratio `√(λ₂/λ₁)` small) and few leaf or pot points, while a leaf edge's holds the
-/// leaf's sheet and a pot's holds the pot.
+/// Which candidate points are not the edge of a leaf or the pot: from photos the candidates
+/// (points whose neighbourhood wraps around an axis, and segments labelled stem or other)
+/// also hold leaf edges, the stereo halo beside leaves, and the pot's rim. A petiole's
+/// surroundings hold few points of leaf or pot segments; a leaf edge's hold its leaf. Measured
+/// among all the plant's points within a ball of `radius_spacings` median point spacings.
+/// The share is a compromise measured on broadleaf plants: 0.3 keeps more leaf edges out of
+/// skeletons from photos (length precision 0.69 against 0.64 at 0.5 on the tuning seed) but
+/// also drops the petioles where they meet the leaf bases in clean points (semi-dense petiole
+/// recall 0.85 against 0.91). A line-likeness test on the same balls (principal width ratio
+/// `√(λ₂/λ₁)`) removed more halo from photos and the petiole bundles at a crown as well
+/// (semi-dense recall 0.68).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct TubeTest {
     /// Ball radius in median point spacings.
     pub radius_spacings: f64,
-    /// Largest principal width ratio `√(λ₂/λ₁)` of the ball.
-    pub max_width_ratio: f64,
-    /// Balls of `radius_spacings` times 1, 2, 4, …: a point passes when the width ratio of
-    /// any of them is small (a thick stem looks like a line only in a ball several times its
-    /// radius).
-    pub scales: u32,
     /// Largest share of the ball's points in segments labelled leaf or pot.
     pub max_sheet_share: f64,
 }
@@ -52,9 +50,7 @@ impl Default for TubeTest {
     fn default() -> Self {
         Self {
             radius_spacings: 12.0,
-            max_width_ratio: 0.5,
-            scales: 2,
-            max_sheet_share: 0.3,
+            max_sheet_share: 0.5,
         }
     }
 }
@@ -112,20 +108,7 @@ pub fn tube_point_indices(
                     )
                 })
                 .count();
-            if sheet as f64 > test.max_sheet_share * around.len() as f64 {
-                return false;
-            }
-            let centre = positions[i as usize];
-            (0..test.scales.max(1)).any(|scale| {
-                let ball = radius * f64::from(1u32 << scale.min(16));
-                let shape = if scale == 0 {
-                    Shape::of(around.iter().map(|found| positions[found.index]))
-                } else {
-                    let wider = neighbours.within_radius(&centre, ball);
-                    Shape::of(wider.iter().map(|found| positions[found.index]))
-                };
-                shape.width_ratio() <= test.max_width_ratio
-            })
+            sheet as f64 <= test.max_sheet_share * around.len() as f64
         })
         .collect()
 }
