@@ -3,8 +3,12 @@
 //! true stems and petioles reach it (and what the foreground and the segment labels made of
 //! the others), and a picture: side and top views with the skeleton's input points coloured by
 //! their true part, the true centrelines (green) and the predicted skeleton (red).
-//! Usage: `cargo run --release --example skeleton_input -- DATASET DENSE_FOLDER [OUT.png]`
-//! (DENSE_FOLDER: a COLMAP folder with images, e.g. `frond reconstruct` output's `dense/`).
+//! It also prints the pot found, the skeleton's length scores against the truth, and with
+//! `--tube` the leaf shares and principal width ratios of the input's surroundings.
+//! Usage: `cargo run --release --example skeleton_input -- DATASET DENSE_FOLDER [OUT.png]
+//! [--all-candidates] [--tube] [--tube-radius SPACINGS] [--tube-sheet SHARE]`
+//! (DENSE_FOLDER: a COLMAP folder with images, e.g. `frond reconstruct` output's `dense/`, or a
+//! synthetic dataset itself for its semi-dense points).
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -22,6 +26,26 @@ use image::{Rgb, RgbImage};
 use nalgebra::Point3;
 
 const NEAR: f64 = 0.002;
+
+/// Distance from a point to the nearest true stem or petiole surface (negative inside).
+fn gap_to_true_stems(truth: &GroundTruth, p: &Point3<f64>) -> f64 {
+    truth
+        .branches
+        .iter()
+        .map(|b| {
+            b.centerline
+                .windows(2)
+                .map(|w| {
+                    frond::branch::spline::point_segment_distance(
+                        p,
+                        &Point3::from(w[0]),
+                        &Point3::from(w[1]),
+                    ) - b.mean_radius()
+                })
+                .fold(f64::INFINITY, f64::min)
+        })
+        .fold(f64::INFINITY, f64::min)
+}
 
 fn part_name(part: Option<i64>) -> &'static str {
     match part {
@@ -166,24 +190,7 @@ fn main() -> Result<()> {
     }
     // Where the skeleton input's points near no true surface lie: by distance from the true
     // stem and petiole surfaces, and by height above the lowest true centreline point.
-    let axis_gap = |p: &Point3<f64>| {
-        truth
-            .branches
-            .iter()
-            .map(|b| {
-                b.centerline
-                    .windows(2)
-                    .map(|w| {
-                        frond::branch::spline::point_segment_distance(
-                            p,
-                            &Point3::from(w[0]),
-                            &Point3::from(w[1]),
-                        ) - b.mean_radius()
-                    })
-                    .fold(f64::INFINITY, f64::min)
-            })
-            .fold(f64::INFINITY, f64::min)
-    };
+    let axis_gap = |p: &Point3<f64>| gap_to_true_stems(&truth, p);
     let base_z = truth
         .branches
         .iter()
@@ -281,22 +288,7 @@ fn main() -> Result<()> {
         let mut histogram: BTreeMap<&str, usize> = BTreeMap::new();
         let mut offsets: Vec<f64> = Vec::new();
         for (k, p) in positions.iter().enumerate().skip(fused) {
-            let axis = truth
-                .branches
-                .iter()
-                .map(|b| {
-                    b.centerline
-                        .windows(2)
-                        .map(|w| {
-                            frond::branch::spline::point_segment_distance(
-                                p,
-                                &Point3::from(w[0]),
-                                &Point3::from(w[1]),
-                            ) - b.mean_radius()
-                        })
-                        .fold(f64::INFINITY, f64::min)
-                })
-                .fold(f64::INFINITY, f64::min);
+            let axis = gap_to_true_stems(&truth, p);
             let class = match (part_of[k], axis) {
                 (Some(1), _) => "on a stem surface",
                 (Some(0), _) => "on a leaf",
