@@ -36,8 +36,8 @@ pub fn skeleton_point_indices(foreground: &Foreground, labels: &Labels) -> Vec<u
 /// skeletons from photos (length precision 0.69 against 0.64 at 0.5 on the tuning seed) but
 /// also drops the petioles where they meet the leaf bases in clean points (semi-dense petiole
 /// recall 0.85 against 0.91). A line-likeness test on the same balls (principal width ratio
-/// `√(λ₂/λ₁)`) removed more halo from photos and the petiole bundles at a crown as well
-/// (semi-dense recall 0.68).
+/// `√(λ₂/λ₁)`) removed more halo from photos and, with the 0.3 share, the petiole bundles at a
+/// crown as well (semi-dense recall 0.68).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct TubeTest {
     /// Ball radius in median point spacings.
