@@ -47,6 +47,18 @@ fn gap_to_true_stems(truth: &GroundTruth, p: &Point3<f64>) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
+/// The 10/25/50/75/90 % quantiles of sorted values, scaled, to two decimals.
+fn quantiles(sorted: &[f64], scale: f64) -> String {
+    [0.1, 0.25, 0.5, 0.75, 0.9]
+        .iter()
+        .map(|f| {
+            let value = sorted[((sorted.len() - 1) as f64 * f) as usize] * scale;
+            format!("{value:.2}")
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
 fn part_name(part: Option<i64>) -> &'static str {
     match part {
         Some(0) => "leaf",
@@ -173,15 +185,7 @@ fn main() -> Result<()> {
         println!("skeleton input: nearest-neighbour distance (mm) 10/25/50/75/90 %");
         for (part, mut g) in gaps {
             g.sort_by(f64::total_cmp);
-            let q = |f: f64| g[((g.len() - 1) as f64 * f) as usize];
-            println!(
-                "  {part:24} {:.2} {:.2} {:.2} {:.2} {:.2}",
-                q(0.1),
-                q(0.25),
-                q(0.5),
-                q(0.75),
-                q(0.9)
-            );
+            println!("  {part:24} {}", quantiles(&g, 1.0));
         }
     }
     println!("skeleton input by foreground class / segment label and true part:");
@@ -304,14 +308,9 @@ fn main() -> Result<()> {
         }
         offsets.sort_by(f64::total_cmp);
         if !offsets.is_empty() {
-            let q = |f: f64| offsets[((offsets.len() - 1) as f64 * f) as usize] * 1e3;
             println!(
-                "thin points within 20 mm of a stem: distance to its surface (mm, negative inside) 10/25/50/75/90 %: {:.1} {:.1} {:.1} {:.1} {:.1}",
-                q(0.1),
-                q(0.25),
-                q(0.5),
-                q(0.75),
-                q(0.9)
+                "thin points within 20 mm of a stem: distance to its surface (mm, negative inside) 10/25/50/75/90 %: {}",
+                quantiles(&offsets, 1e3)
             );
         }
         println!("thin-organ sweep points: {}", positions.len() - fused);
@@ -449,24 +448,15 @@ fn tube_features(
             radius * 1e3
         );
         for (kind, mut values) in features {
-            let q = |v: &[f64], f: f64| v[((v.len() - 1) as f64 * f) as usize];
             let mut a: Vec<f64> = values.iter().map(|v| v.0).collect();
             a.sort_by(f64::total_cmp);
             values.sort_by(|x, y| x.1.total_cmp(&y.1));
             let b: Vec<f64> = values.iter().map(|v| v.1).collect();
             println!(
-                "  {kind:12} {:6} | {:.2} {:.2} {:.2} {:.2} {:.2} | {:.2} {:.2} {:.2} {:.2} {:.2}",
+                "  {kind:12} {:6} | {} | {}",
                 a.len(),
-                q(&a, 0.1),
-                q(&a, 0.25),
-                q(&a, 0.5),
-                q(&a, 0.75),
-                q(&a, 0.9),
-                q(&b, 0.1),
-                q(&b, 0.25),
-                q(&b, 0.5),
-                q(&b, 0.75),
-                q(&b, 0.9)
+                quantiles(&a, 1.0),
+                quantiles(&b, 1.0)
             );
         }
     }

@@ -438,6 +438,16 @@ pub fn branch_support(
     tolerance: f64,
 ) -> Vec<BranchSupport> {
     let neighbours = Neighbours::new(points.iter().copied()).ok();
+    support_by(tree, neighbours.as_ref(), step, tolerance)
+}
+
+/// [`branch_support`] over indexed points (`None`: no points).
+fn support_by(
+    tree: &BranchTree,
+    neighbours: Option<&Neighbours>,
+    step: f64,
+    tolerance: f64,
+) -> Vec<BranchSupport> {
     tree.branches
         .iter()
         .map(|branch| {
@@ -452,7 +462,6 @@ pub fn branch_support(
                 .map(|(k, (p, _))| {
                     let reach = cylinder.radius_at(k as f64 / last) + tolerance;
                     neighbours
-                        .as_ref()
                         .and_then(|n| n.nearest(p))
                         .is_some_and(|found| found.distance() <= reach)
                 })
@@ -478,7 +487,7 @@ pub fn branch_support(
 }
 
 /// [`branch_support`] of a plant's branches by its [`skeleton_input`], sampled and tolerant
-/// by two median spacings of those points.
+/// by two median spacings of those points (with fewer than two points nothing is observed).
 pub fn plant_branch_support(
     segmentation: &Segmentation,
     labels: &Labels,
@@ -486,23 +495,11 @@ pub fn plant_branch_support(
     tube: &TubeTest,
 ) -> Vec<BranchSupport> {
     let (points, _) = skeleton_input(segmentation, labels, tube);
-    let spacing = Neighbours::new(points.iter().copied())
-        .ok()
-        .and_then(|n| median_spacing(&n))
-        .unwrap_or(0.0);
-    if spacing <= 0.0 {
-        // No points: nothing is observed.
-        return branch_support(tree, &[], 1e-3 * plant_extent(tree).max(1e-9), 0.0);
+    let neighbours = Neighbours::new(points.iter().copied()).ok();
+    match neighbours.as_ref().and_then(median_spacing) {
+        Some(spacing) => support_by(tree, neighbours.as_ref(), 2.0 * spacing, 2.0 * spacing),
+        None => support_by(tree, None, f64::INFINITY, 0.0),
     }
-    branch_support(tree, &points, 2.0 * spacing, 2.0 * spacing)
-}
-
-/// The largest branch length of a tree (0 without branches).
-fn plant_extent(tree: &BranchTree) -> f64 {
-    tree.branches
-        .iter()
-        .map(|b| b.cylinder.length())
-        .fold(0.0, f64::max)
 }
 
 /// One branch as written to `skeleton.json` and to a synthetic dataset's `gt/branches.json`
