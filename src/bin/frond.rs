@@ -376,6 +376,21 @@ enum Command {
         #[arg(long)]
         seed: Option<u64>,
     },
+    /// The organ sequence along a reconstruction's main stem (internodes and signed
+    /// divergence angles), and with --measures its alignment to measured ones (ROMI's
+    /// measures.json) with organ-count, internode and angle errors.
+    Phyllotaxis {
+        /// A `frond reconstruct` output folder.
+        reconstruction: PathBuf,
+        /// Measured sequence: JSON with `angles` (radians) and `internodes` (millimetres), one
+        /// per interval between successive organs. Needs a scale.
+        #[arg(long)]
+        measures: Option<PathBuf>,
+        #[command(flatten)]
+        scale: ScaleArgs,
+        #[arg(long)]
+        json: bool,
+    },
     /// Measure a reconstruction's organs: `traits.csv` (long form: plant, organ_id,
     /// organ_type, trait, value, unit) and `traits.json`, written into the folder (or --out).
     Traits {
@@ -388,7 +403,7 @@ enum Command {
         scale: ScaleArgs,
         /// Measure a synthetic dataset's ground truth (gt/leaves, gt/branches.json; metres)
         /// by the same code, e.g. to compare tables.
-        #[arg(long, conflicts_with_all = ["scale", "scale_from", "scale_checkerboard"])]
+        #[arg(long, conflicts_with_all = ["scale", "scale_from", "scale_checkerboard", "scale_orbit"])]
         truth: bool,
         /// Where to write the two files (default: the reconstruction folder).
         #[arg(long)]
@@ -410,8 +425,27 @@ struct ScaleArgs {
     /// A printed checkerboard in the photos: COLSxROWS:SQUARE_METRES, counting inner
     /// corners (e.g. 8x6:0.02 for a board of 9×7 squares of 2 cm), found by OpenCV in the
     /// photos of the reconstruction's scene.
-    #[arg(long, conflicts_with = "scale")]
+    #[arg(long, conflicts_with_all = ["scale", "scale_orbit"])]
     scale_checkerboard: Option<String>,
+    /// The cameras travelled a circle of this radius in metres (a turntable, a rail orbit,
+    /// ROMI's plant imager at 0.3): the circle is fitted to the scene's camera centres.
+    #[arg(long, conflicts_with_all = ["scale", "scale_from"])]
+    scale_orbit: Option<f64>,
+}
+
+/// The scene a reconstruction folder was made from (its report.json says which).
+fn reconstruction_scene(reconstruction: &Path) -> Result<(PathBuf, Scene)> {
+    let report_path = reconstruction.join("report.json");
+    let report = frond::pipeline::ReconstructionReport::read(&report_path)
+        .with_context(|| format!("reading {}", report_path.display()))?;
+    let scene_path = report
+        .preparation
+        .as_ref()
+        .map(|p| p.scene.clone())
+        .unwrap_or(report.input.clone());
+    let scene = Scene::open(&scene_path)
+        .with_context(|| format!("opening the scene {}", scene_path.display()))?;
+    Ok((scene_path, scene))
 }
 
 impl ScaleArgs {
@@ -420,16 +454,7 @@ impl ScaleArgs {
     fn scale(&self, reconstruction: &Path) -> Result<Option<frond::traits::Scale>> {
         if let Some(text) = &self.scale_checkerboard {
             let (inner, square) = frond::traits::marker::parse_checkerboard(text)?;
-            let report_path = reconstruction.join("report.json");
-            let report = frond::pipeline::ReconstructionReport::read(&report_path)
-                .with_context(|| format!("reading {}", report_path.display()))?;
-            let scene_path = report
-                .preparation
-                .as_ref()
-                .map(|p| p.scene.clone())
-                .unwrap_or(report.input.clone());
-            let scene = Scene::open(&scene_path)
-                .with_context(|| format!("opening the scene {}", scene_path.display()))?;
+            let (scene_path, scene) = reconstruction_scene(reconstruction)?;
             let (scale, found) = frond::traits::marker::checkerboard_scale(&scene, inner, square)
                 .with_context(|| {
                 format!("--scale-checkerboard {text} in {}", scene_path.display())
@@ -442,6 +467,30 @@ impl ScaleArgs {
             );
             return Ok(Some(scale));
         }
+        if let Some(radius) = self.scale_orbit {
+            let (scene_path, scene) = reconstruction_scene(reconstruction)?;
+            let centres: Vec<_> = scene
+                .reconstruction
+                .images()
+                .iter()
+                .map(|image| image.center_world())
+                .collect();
+            let (scale, residual) = frond::traits::Scale::from_camera_orbit(&centres, radius)
+                .with_context(|| {
+                    format!(
+                        "--scale-orbit {radius} on the cameras of {}",
+                        scene_path.display()
+                    )
+                })?;
+            eprintln!("{}", scale.source);
+            if residual > 0.05 {
+                eprintln!(
+                    "warning: the cameras are {:.1} % of the radius off the fitted circle; is the path a circle?",
+                    100.0 * residual
+                );
+            }
+            return Ok(Some(scale));
+        }
         Ok(match (&self.scale, &self.scale_from) {
             (Some(f), _) => Some(frond::traits::Scale::factor(*f)?),
             (None, Some(text)) => Some(
@@ -451,6 +500,82 @@ impl ScaleArgs {
             (None, None) => None,
         })
     }
+}
+
+fn phyllotaxis(
+    reconstruction: &Path,
+    measures: Option<&Path>,
+    scale: &ScaleArgs,
+    json: bool,
+) -> Result<()> {
+    let organs =
+        frond::traits::io::read_reconstruction(reconstruction, &plant_name(reconstruction))
+            .with_context(|| format!("reading the reconstruction {}", reconstruction.display()))?;
+    let Some(sequence) = frond::traits::phyllotaxis::stem_sequence(&organs) else {
+        bail!(
+            "{}: no main stem with at least two organs on it",
+            reconstruction.display()
+        );
+    };
+    let scale = scale.scale(reconstruction)?;
+    let comparison = match measures {
+        Some(path) => {
+            let measures = frond::eval::phyllotaxis::Measures::read(path)?;
+            let scale = scale.as_ref().with_context(|| {
+                format!(
+                    "{} is in millimetres: give a scale (--scale, --scale-from, --scale-checkerboard or --scale-orbit)",
+                    path.display()
+                )
+            })?;
+            Some(frond::eval::phyllotaxis::compare(
+                &sequence,
+                1000.0 * scale.metres_per_unit,
+                &measures,
+            ))
+        }
+        None => None,
+    };
+    if json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({
+                "scale": scale,
+                "sequence": sequence,
+                "comparison": comparison,
+            }))?
+        );
+        return Ok(());
+    }
+    let (factor, unit) = match &scale {
+        Some(s) => (1000.0 * s.metres_per_unit, "mm"),
+        None => (1.0, "model units"),
+    };
+    println!(
+        "main stem branch_{:03}: {:.1} {unit}, {} organs",
+        sequence.stem,
+        sequence.stem_length * factor,
+        sequence.organs.len()
+    );
+    println!(
+        "internodes ({unit}): {:?}",
+        sequence
+            .internodes
+            .iter()
+            .map(|v| (v * factor * 10.0).round() / 10.0)
+            .collect::<Vec<_>>()
+    );
+    println!(
+        "divergence angles (deg, counter-clockwise about the stem): {:?}",
+        sequence
+            .angles_deg
+            .iter()
+            .map(|v| v.round())
+            .collect::<Vec<_>>()
+    );
+    if let Some(comparison) = comparison {
+        print!("{}", comparison.to_text());
+    }
+    Ok(())
 }
 
 fn plant_name(folder: &Path) -> String {
@@ -2018,6 +2143,12 @@ fn main() -> Result<()> {
             }
             Ok(())
         }
+        Command::Phyllotaxis {
+            reconstruction,
+            measures,
+            scale,
+            json,
+        } => phyllotaxis(reconstruction, measures.as_deref(), scale, *json),
         Command::Traits {
             reconstruction,
             plant,

@@ -16,6 +16,7 @@ pub mod align;
 pub mod dense;
 pub mod geometry;
 pub mod metrics;
+pub mod phyllotaxis;
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};

@@ -13,6 +13,7 @@ pub mod accuracy;
 pub mod hull;
 pub mod io;
 pub mod marker;
+pub mod phyllotaxis;
 
 use std::collections::BTreeMap;
 
@@ -115,6 +116,87 @@ impl Scale {
         let mut scale = Self::factor(metres / units)?;
         scale.source = format!("{metres} m between {a} and {b} ({units} model units)");
         Ok(scale)
+    }
+}
+
+impl Scale {
+    /// The cameras travelled a circle of known radius (a turntable, a rail orbit, ROMI's plant
+    /// imager): the circle is fitted to the camera centres (plane by PCA, then an algebraic
+    /// least-squares circle in that plane, so a partial arc works) and its radius in model
+    /// units set against `radius_metres`. Also returns the fit's RMS residual as a share of
+    /// the radius, so a path that is no circle is visible.
+    pub fn from_camera_orbit(
+        centres_world: &[Point3<f64>],
+        radius_metres: f64,
+    ) -> Result<(Self, f64), TraitsError> {
+        if !(radius_metres.is_finite() && radius_metres > 0.0) {
+            return Err(TraitsError::Scale(format!(
+                "the orbit radius must be a positive number of metres, not {radius_metres}"
+            )));
+        }
+        if centres_world.len() < 3 {
+            return Err(TraitsError::Scale(format!(
+                "a circle needs at least 3 camera centres, the scene has {}",
+                centres_world.len()
+            )));
+        }
+        let n = centres_world.len() as f64;
+        let centroid = centres_world
+            .iter()
+            .fold(Vector3::zeros(), |s, c| s + c.coords)
+            / n;
+        let mut covariance = Matrix3::zeros();
+        for c in centres_world {
+            let d = c.coords - centroid;
+            covariance += d * d.transpose();
+        }
+        let eigen = SymmetricEigen::new(covariance / n);
+        let mut order = [0usize, 1, 2];
+        order.sort_by(|a, b| eigen.eigenvalues[*b].total_cmp(&eigen.eigenvalues[*a]));
+        let (u, v) = (
+            eigen.eigenvectors.column(order[0]).into_owned(),
+            eigen.eigenvectors.column(order[1]).into_owned(),
+        );
+        let planar: Vec<Point2<f64>> = centres_world
+            .iter()
+            .map(|c| {
+                let d = c.coords - centroid;
+                Point2::new(d.dot(&u), d.dot(&v))
+            })
+            .collect();
+        // Kåsa: x² + y² = 2 a x + 2 b y + c, least squares in (a, b, c).
+        let mut normal = nalgebra::Matrix3::<f64>::zeros();
+        let mut rhs = Vector3::zeros();
+        for p in &planar {
+            let row = Vector3::new(2.0 * p.x, 2.0 * p.y, 1.0);
+            normal += row * row.transpose();
+            rhs += row * (p.x * p.x + p.y * p.y);
+        }
+        let solution = normal.lu().solve(&rhs).ok_or_else(|| {
+            TraitsError::Scale("the camera centres lie on a line, not a circle".into())
+        })?;
+        let centre = Point2::new(solution.x, solution.y);
+        let radius_squared = solution.z + centre.coords.norm_squared();
+        if !positive(radius_squared) {
+            return Err(TraitsError::Scale(
+                "the camera centres fit no circle".into(),
+            ));
+        }
+        let radius = radius_squared.sqrt();
+        let residual = (planar
+            .iter()
+            .map(|p| ((p - centre).norm() - radius).powi(2))
+            .sum::<f64>()
+            / n)
+            .sqrt()
+            / radius;
+        let mut scale = Self::factor(radius_metres / radius)?;
+        scale.source = format!(
+            "cameras on a circle of {radius_metres} m ({radius} model units, RMS residual {:.1} % of the radius, {} cameras)",
+            100.0 * residual,
+            centres_world.len()
+        );
+        Ok((scale, residual))
     }
 }
 
@@ -405,7 +487,7 @@ pub fn leaf_traits(
 }
 
 /// Point and unit tangent at arc-length fraction `s` ∈ [0, 1] of a polyline.
-fn polyline_at(line: &[[f64; 3]], s: f64) -> Option<(Point3<f64>, Vector3<f64>)> {
+pub(crate) fn polyline_at(line: &[[f64; 3]], s: f64) -> Option<(Point3<f64>, Vector3<f64>)> {
     let points: Vec<Point3<f64>> = line.iter().map(|c| Point3::from(*c)).collect();
     if points.len() < 2 {
         return None;
@@ -443,7 +525,7 @@ pub fn branch_length(branch: &SkeletonRecord) -> f64 {
 
 /// The direction a branch leaves its base: from its first point to the point a tenth of its
 /// length along (skipping the first sample's noise).
-fn initial_direction(branch: &SkeletonRecord) -> Option<Vector3<f64>> {
+pub(crate) fn initial_direction(branch: &SkeletonRecord) -> Option<Vector3<f64>> {
     let (start, _) = polyline_at(&branch.centerline, 0.0)?;
     let (ahead, _) = polyline_at(&branch.centerline, 0.1)?;
     (ahead - start).try_normalize(1e-15)
@@ -995,5 +1077,31 @@ mod tests {
         assert!(Scale::parse_two_points("0,0,0:1,1,1:-1").is_err());
         assert!(Scale::factor(0.0).is_err());
         assert!(Scale::factor(f64::NAN).is_err());
+    }
+
+    #[test]
+    fn scales_from_a_tilted_partial_camera_orbit() {
+        // 20 cameras over 200° of a circle of radius 2.5 model units, tilted and moved; the
+        // rig's circle is 0.3 m, so 0.12 m per unit.
+        let tilt = nalgebra::Rotation3::from_euler_angles(0.4, -0.2, 1.1);
+        let centres: Vec<Point3<f64>> = (0..20)
+            .map(|k| {
+                let a = (k as f64 * 10.0).to_radians();
+                let wobble = 0.01 * ((k * 7 % 5) as f64 - 2.0);
+                Point3::new(3.0, -1.0, 0.5)
+                    + tilt * Vector3::new((2.5 + wobble) * a.cos(), (2.5 + wobble) * a.sin(), 0.0)
+            })
+            .collect();
+        let (scale, residual) = Scale::from_camera_orbit(&centres, 0.3).unwrap();
+        assert!(
+            (scale.metres_per_unit - 0.12).abs() < 0.12 * 0.005,
+            "{scale:?}"
+        );
+        assert!(residual < 0.01 && residual > 0.0, "{residual}");
+        // A line of cameras is no circle; two cameras are too few; the radius must be positive.
+        let line: Vec<Point3<f64>> = (0..5).map(|k| Point3::new(k as f64, 0.0, 0.0)).collect();
+        assert!(Scale::from_camera_orbit(&line, 0.3).is_err());
+        assert!(Scale::from_camera_orbit(&centres[..2], 0.3).is_err());
+        assert!(Scale::from_camera_orbit(&centres, -1.0).is_err());
     }
 }
