@@ -660,13 +660,14 @@ fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> us
     if branches.is_empty() {
         return 0;
     }
-    // Axis samples about every half level width, with their radii.
+    // Axis samples about every half level width, with their radii, branches and tangents.
     let mut samples: Vec<([f64; 3], f64)> = Vec::new();
+    let mut sample_axes: Vec<(u32, Vector3<f64>)> = Vec::new();
     for branch in branches.iter() {
         let cylinder = &branch.cylinder;
         let count =
             ((cylinder.skeleton.length() / (0.5 * level_width)).ceil() as usize).clamp(2, 2000);
-        for (k, (p, _)) in cylinder
+        for (k, (p, tangent)) in cylinder
             .skeleton
             .sample_by_arc_length(count)
             .iter()
@@ -674,6 +675,7 @@ fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> us
         {
             let fraction = k as f64 / (count - 1) as f64;
             samples.push(([p.x, p.y, p.z], cylinder.radius_at(fraction)));
+            sample_axes.push((branch.id, *tangent));
         }
     }
     let Ok(axis_neighbours) = Neighbours::new(samples.iter().map(|s| Point3::from(s.0))) else {
@@ -765,6 +767,15 @@ fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> us
             polyline.reverse();
         }
         let polyline = smooth(&polyline);
+        if runs_beside_an_axis(
+            &polyline,
+            &samples,
+            &sample_axes,
+            &axis_neighbours,
+            level_width,
+        ) {
+            continue;
+        }
         let origin = polyline[0];
         let Some(backward) = (origin - polyline[polyline.len().min(4) - 1]).try_normalize(1e-12)
         else {
@@ -816,6 +827,51 @@ fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> us
         added += 1;
     }
     added
+}
+
+/// A tube found beside an existing branch and parallel to it along most of its length is
+/// that branch's twin, not an organ of its own: stereo smears a thin organ across the
+/// viewing direction into a band wider than its fitted radius, and the band's far edge is
+/// left unexplained. Two real organs that leave a node together (petioles at a crown) diverge
+/// toward their tips. Twin: at 75 % or more of the polyline's vertices the nearest axis is one
+/// and the same branch, within twice (its radius + a level width), and the polyline's
+/// direction there is within 25° of that axis.
+fn runs_beside_an_axis(
+    polyline: &[Point3<f64>],
+    samples: &[([f64; 3], f64)],
+    sample_axes: &[(u32, Vector3<f64>)],
+    axis_neighbours: &Neighbours,
+    level_width: f64,
+) -> bool {
+    const SHARE: f64 = 0.75;
+    const MAX_ANGLE_DEG: f64 = 25.0;
+    let cos_max = MAX_ANGLE_DEG.to_radians().cos();
+    if polyline.len() < 2 {
+        return false;
+    }
+    let mut beside: std::collections::BTreeMap<u32, usize> = Default::default();
+    for (k, p) in polyline.iter().enumerate() {
+        let (a, b) = (
+            polyline[k.saturating_sub(1)],
+            polyline[(k + 1).min(polyline.len() - 1)],
+        );
+        let Some(direction) = (b - a).try_normalize(1e-12) else {
+            continue;
+        };
+        let Some(nearest) = axis_neighbours.nearest(p) else {
+            continue;
+        };
+        let (branch, tangent) = sample_axes[nearest.index];
+        let radius = samples[nearest.index].1;
+        if nearest.distance() <= 2.0 * (radius + level_width)
+            && direction.dot(&tangent).abs() >= cos_max
+        {
+            *beside.entry(branch).or_default() += 1;
+        }
+    }
+    beside
+        .values()
+        .any(|&n| n as f64 >= SHARE * polyline.len() as f64)
 }
 
 /// Joins sibling pieces of a level that nearly touch (closest points less than a level width
@@ -1572,6 +1628,49 @@ mod tests {
         assert!((found.cylinder.radius_at(0.5) - 0.0025).abs() < 0.0015);
         // Once it is found, nothing is left to recover.
         assert_eq!(recover(&mut branches, &points), 0);
+    }
+
+    #[test]
+    fn the_far_edge_of_a_smeared_organ_is_no_organ_of_its_own() {
+        let mut rng = Rng::seed_from(21);
+        let straight = |a: Point3<f64>, b: Point3<f64>, radius: f64| Branch {
+            id: 0,
+            parent: None,
+            parent_fraction: 0.0,
+            cylinder: GeneralizedCylinder::new(Spline::new(vec![a, b]).unwrap(), radius, radius),
+            leaf_at_tip: false,
+        };
+        let stem_axis = [Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, 0.12)];
+        let mut points = tube(&stem_axis, 0.004, 6_000.0, &mut rng);
+        // A fruit from the stem at 50 mm, 40° from vertical, fitted with its own radius;
+        // stereo smeared it sideways: a second band of points 8 mm beside it, parallel to
+        // it over its whole length (the fitted branch explains only 3 mm + a level width).
+        let direction = Vector3::new(40f64.to_radians().sin(), 0.0, 40f64.to_radians().cos());
+        let base = Point3::new(0.0, 0.0, 0.05);
+        let fruit = [base, base + direction * 0.1];
+        points.extend(tube(&fruit, 0.003, 3_000.0, &mut rng));
+        let aside = Vector3::new(0.0, 0.008, 0.0);
+        let smear = [fruit[0] + aside, fruit[1] + aside];
+        points.extend(tube(&smear, 0.002, 3_000.0, &mut rng));
+        let mut branches = vec![straight(stem_axis[0], stem_axis[1], 0.004)];
+        let mut fitted = straight(fruit[0], fruit[1], 0.003);
+        fitted.id = 1;
+        fitted.parent = Some(0);
+        fitted.parent_fraction = 0.05 / 0.12;
+        branches.push(fitted.clone());
+        assert_eq!(
+            recover(&mut branches, &points),
+            0,
+            "the twin became a branch"
+        );
+        // A second fruit from the same node that turns away from the first one is an organ.
+        let away = Vector3::new(0.0, -50f64.to_radians().sin(), 50f64.to_radians().cos());
+        let sibling = [base, base + away * 0.1];
+        points.extend(tube(&sibling, 0.0025, 3_000.0, &mut rng));
+        let mut branches = vec![straight(stem_axis[0], stem_axis[1], 0.004), fitted];
+        assert_eq!(recover(&mut branches, &points), 1);
+        let tip = branches[2].cylinder.skeleton.point_at_fraction(1.0);
+        assert!((tip - sibling[1]).norm() < 0.01, "tip {tip}");
     }
 
     #[test]
