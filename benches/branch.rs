@@ -1,12 +1,16 @@
 //! Branch speed (issue targets: re-meshing an edited branch < 5 ms; automatic skeleton of a
-//! 100k-point plant < 3 s). The skeleton runs on the non-leaf points of a synthetic medium
-//! plant segmented from ~100k points; baseline in the same run: the plain 3-NN pairs of the
-//! same points (kiddo), which the skeleton's graph construction extends.
+//! 100k-point plant < 3 s, and of a 500k-point plant < 3 s). The skeleton runs on the non-leaf
+//! points of a synthetic medium plant segmented from ~125k and ~500k points; baseline in the
+//! same run: the plain 3-NN pairs of the same points (kiddo), which the skeleton's graph
+//! construction extends. At 500k the whole step the pipeline runs is timed as well: the
+//! skeleton's input (tube test, pot and soil) and the skeleton.
 
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use frond::branch::plant::{TubeTest, model_branches, skeleton_points};
+use frond::branch::plant::{
+    PlantSkeletonOptions, TubeTest, automatic_plant_skeleton, model_branches, skeleton_points,
+};
 use frond::branch::skeleton::{SkeletonOptions, automatic_skeleton};
 use frond::branch::{CylinderMeshing, GeneralizedCylinder, Spline};
 use frond::edit::Session;
@@ -44,12 +48,18 @@ fn branches(c: &mut Criterion) {
     });
     group.finish();
 
+    skeleton_on_plant(c, "automatic_skeleton_100k_point_plant", 125_000, false);
+    skeleton_on_plant(c, "automatic_skeleton_500k_point_plant", 500_000, true);
+}
+
+/// The skeleton benchmarks on a synthetic medium plant of `target_points` points.
+fn skeleton_on_plant(c: &mut Criterion, name: &str, target_points: usize, whole_step: bool) {
     let dir = tempfile::tempdir().expect("temp dir");
     let root = dir.path().join("plant");
     let options = SynthOptions {
         preset: Preset::Medium,
         seed: 20,
-        target_points: 125_000,
+        target_points,
         ..SynthOptions::default()
     };
     write_dataset(&options, &root, &NoProgress).expect("synthetic dataset");
@@ -76,7 +86,7 @@ fn branches(c: &mut Criterion) {
         positions: points.clone(),
         ..PointSet::default()
     };
-    let mut group = c.benchmark_group("automatic_skeleton_100k_point_plant");
+    let mut group = c.benchmark_group(name);
     group.sample_size(10);
     group.bench_function("baseline_knn_pairs_k3", |b| {
         b.iter(|| black_box(knn_pairs(&point_set, 3)))
@@ -89,13 +99,29 @@ fn branches(c: &mut Criterion) {
             )
         })
     });
-    group.bench_function("skeleton_and_meshes", |b| {
-        b.iter(|| {
-            let (tree, _) = automatic_skeleton(&points, &up, &centre, &SkeletonOptions::default())
-                .expect("skeleton");
-            black_box(model_branches(&tree))
-        })
-    });
+    if whole_step {
+        group.bench_function("skeleton_input_and_skeleton", |b| {
+            b.iter(|| {
+                black_box(
+                    automatic_plant_skeleton(
+                        session.segmentation(),
+                        session.labels(),
+                        &PlantSkeletonOptions::default(),
+                    )
+                    .expect("skeleton"),
+                )
+            })
+        });
+    } else {
+        group.bench_function("skeleton_and_meshes", |b| {
+            b.iter(|| {
+                let (tree, _) =
+                    automatic_skeleton(&points, &up, &centre, &SkeletonOptions::default())
+                        .expect("skeleton");
+                black_box(model_branches(&tree))
+            })
+        });
+    }
     group.finish();
 }
 

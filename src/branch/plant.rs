@@ -4,6 +4,7 @@
 //! returns a [`BranchTree`], skeleton records and model branches.
 
 use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::skeleton::{SkeletonError, SkeletonOptions, SkeletonStats, automatic_skeleton};
@@ -95,10 +96,10 @@ pub fn tube_point_indices(
     };
     let radius = test.radius_spacings * spacing;
     candidates
-        .iter()
+        .par_iter()
         .copied()
         .filter(|&i| {
-            let around = neighbours.within_radius(&positions[i as usize], radius);
+            let around = neighbours.within_radius_unsorted(&positions[i as usize], radius);
             let sheet = around
                 .iter()
                 .filter(|found| {
@@ -397,12 +398,44 @@ pub fn automatic_plant_skeleton(
     options: &PlantSkeletonOptions,
 ) -> Result<(BranchTree, SkeletonStats), SkeletonError> {
     let (points, base) = skeleton_input(segmentation, labels, &options.tube);
-    automatic_skeleton(
-        &points,
-        &segmentation.foreground.up,
-        &base,
-        &options.skeleton,
-    )
+    let up = segmentation.foreground.up;
+    let (tree, stats) = automatic_skeleton(&points, &up, &base, &options.skeleton)?;
+    stem_rises(&tree, &up)?;
+    Ok((tree, stats))
+}
+
+/// A main stem rises from the plant's base: the root branch's highest point lies at least a
+/// tenth of its length above its start. Measured: 0.20–0.91 on the skeletons of synthetic
+/// plants from photos and 0.61 on the real Arabidopsis, against 0.03 for the pot rim a
+/// skeleton followed when the stem's points were removed. Trees without a root pass.
+pub fn stem_rises(tree: &BranchTree, up: &Vector3<f64>) -> Result<(), SkeletonError> {
+    const MIN_RISE: f64 = 0.1;
+    let Some(stem) = tree
+        .branches
+        .iter()
+        .filter(|b| b.parent.is_none())
+        .max_by(|a, b| {
+            a.cylinder
+                .skeleton
+                .length()
+                .total_cmp(&b.cylinder.skeleton.length())
+        })
+    else {
+        return Ok(());
+    };
+    let length = stem.cylinder.skeleton.length();
+    let samples = stem.cylinder.skeleton.sample_by_arc_length(64);
+    let Some((start, _)) = samples.first() else {
+        return Ok(());
+    };
+    let rise = samples
+        .iter()
+        .map(|(p, _)| up.dot(&(p - start)))
+        .fold(0.0, f64::max);
+    if length > 0.0 && rise < MIN_RISE * length {
+        return Err(SkeletonError::NoStem { rise, length });
+    }
+    Ok(())
 }
 
 /// How much of a branch the points show: the length along which some point lies within the
@@ -682,6 +715,45 @@ pub fn model_branches(tree: &BranchTree) -> Vec<ModelBranch> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_flat_main_axis_is_no_stem() {
+        use crate::branch::{Branch, GeneralizedCylinder, Spline};
+        let branch = |points: Vec<Point3<f64>>| Branch {
+            id: 0,
+            parent: None,
+            parent_fraction: 0.0,
+            cylinder: GeneralizedCylinder::new(Spline::new(points).unwrap(), 0.003, 0.002),
+            leaf_at_tip: false,
+        };
+        let up = Vector3::z();
+        // From the base out to a rim 0.1 away and 12 mm up, then three quarters around it.
+        let mut ring = vec![Point3::new(0.0, 0.0, 0.123), Point3::new(0.05, 0.0, 0.129)];
+        ring.extend((0..=12).map(|k| {
+            let a = (k as f64 * 22.5).to_radians();
+            Point3::new(0.097 * a.cos(), 0.097 * a.sin(), 0.135)
+        }));
+        let tree = BranchTree {
+            branches: vec![branch(ring)],
+        };
+        match stem_rises(&tree, &up) {
+            Err(SkeletonError::NoStem { rise, length }) => {
+                assert!((rise - 0.012).abs() < 0.002, "{rise}");
+                assert!(length > 0.4, "{length}");
+            }
+            other => panic!("{other:?}"),
+        }
+        // A leaning stem that rises a fifth of its length passes; so does no tree at all.
+        let leaning = BranchTree {
+            branches: vec![branch(vec![
+                Point3::new(0.0, 0.0, 0.0),
+                Point3::new(0.2, 0.0, 0.03),
+                Point3::new(0.4, 0.0, 0.08),
+            ])],
+        };
+        assert!(stem_rises(&leaning, &up).is_ok());
+        assert!(stem_rises(&BranchTree::default(), &up).is_ok());
+    }
 
     #[test]
     fn a_tapered_wall_is_centred_from_a_third_of_its_arc_among_outliers() {

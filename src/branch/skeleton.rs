@@ -81,6 +81,11 @@ pub enum SkeletonError {
     TooFewPoints(usize),
     #[error("the non-leaf points contain a non-finite coordinate (point {0})")]
     NonFinite(usize),
+    /// The main axis found lies flat: it runs around the pot or over the soil.
+    #[error(
+        "no stem visible: the main axis found rises {rise:.4} over a length of {length:.4} (less than a tenth), so it is the pot or the soil, not a stem; the plant is leaves only"
+    )]
+    NoStem { rise: f64, length: f64 },
 }
 
 /// Non-negative distances ordered by their bits (valid for finite values ≥ 0).

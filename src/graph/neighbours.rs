@@ -109,6 +109,25 @@ impl Neighbours {
             .collect()
     }
 
+    /// The points within `radius` of `query` (inclusive), in no particular order: the same
+    /// set as [`Neighbours::within_radius`] without the cost of sorting it.
+    pub fn within_radius_unsorted(&self, query: &Point3<f64>, radius: f64) -> Vec<Neighbour> {
+        if self.is_empty() || radius.is_nan() || radius < 0.0 {
+            return Vec::new();
+        }
+        self.tree
+            .query(&[query.x, query.y, query.z])
+            .within::<SquaredEuclidean<f64>>(radius * radius)
+            .unsorted()
+            .execute()
+            .into_iter()
+            .map(|found| Neighbour {
+                index: found.item as usize,
+                distance_squared: found.distance,
+            })
+            .collect()
+    }
+
     fn nearest_k_to(&self, query: &[f64; 3], k: NonZero<usize>) -> Vec<Neighbour> {
         self.tree
             .query(query)
@@ -183,5 +202,16 @@ mod tests {
             inside
         );
         assert!(neighbours.within_radius(&query, -1.0).is_empty());
+        // Unsorted: the same points.
+        let mut unsorted: Vec<usize> = neighbours
+            .within_radius_unsorted(&query, radius)
+            .iter()
+            .map(|n| n.index)
+            .collect();
+        let mut sorted: Vec<usize> = found.iter().map(|n| n.index).collect();
+        unsorted.sort_unstable();
+        sorted.sort_unstable();
+        assert_eq!(unsorted, sorted);
+        assert!(neighbours.within_radius_unsorted(&query, -1.0).is_empty());
     }
 }
