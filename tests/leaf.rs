@@ -548,3 +548,86 @@ fn reconstruct_writes_traits_and_traits_follow_the_scale() {
     assert!(median("leaf_inclination_error_deg") <= 5.0, "{accuracy}");
     assert!(median("leaf_length_relative_error") <= 0.05, "{accuracy}");
 }
+
+/// `frond phyllotaxis`: the truth's organ sequence along its main stem, written as measures
+/// (radians and millimetres, ROMI's measures.json), aligned with the reconstruction's.
+#[test]
+fn the_stem_sequence_is_aligned_with_the_truths() {
+    let out = reconstruction();
+    let truth = cargo_bin_cmd!("frond")
+        .args(["phyllotaxis", "--truth", "--json"])
+        .arg(dataset())
+        .output()
+        .unwrap();
+    assert!(truth.status.success(), "{truth:?}");
+    let truth: Value = serde_json::from_slice(&truth.stdout).unwrap();
+    let sequence = &truth["sequence"];
+    let numbers = |key: &str, factor: f64| -> Vec<f64> {
+        sequence[key]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap() * factor)
+            .collect()
+    };
+    let angles = numbers("angles_deg", std::f64::consts::PI / 180.0);
+    let internodes = numbers("internodes", 1000.0);
+    let organs = sequence["organs"].as_array().unwrap().len();
+    assert_eq!(angles.len() + 1, organs);
+    assert!(organs >= 3, "{sequence}");
+    let dir = tempfile::tempdir().unwrap();
+    let measures = dir.path().join("measures.json");
+    std::fs::write(
+        &measures,
+        serde_json::json!({"angles": angles, "internodes": internodes}).to_string(),
+    )
+    .unwrap();
+    // Millimetres need a scale.
+    let unscaled = cargo_bin_cmd!("frond")
+        .arg("phyllotaxis")
+        .arg(out)
+        .arg("--measures")
+        .arg(&measures)
+        .output()
+        .unwrap();
+    let message = String::from_utf8_lossy(&unscaled.stderr);
+    assert!(
+        !unscaled.status.success() && message.contains("give a scale"),
+        "{message}"
+    );
+    // The semi-dense scene is the truth's metric world.
+    let compared = cargo_bin_cmd!("frond")
+        .arg("phyllotaxis")
+        .arg(out)
+        .arg("--measures")
+        .arg(&measures)
+        .args(["--scale", "1", "--json"])
+        .output()
+        .unwrap();
+    assert!(compared.status.success(), "{compared:?}");
+    let compared: Value = serde_json::from_slice(&compared.stdout).unwrap();
+    let comparison = &compared["comparison"];
+    eprintln!(
+        "organs {} predicted / {} measured; paired medians {} mm, {} deg; matched share {}",
+        comparison["organs_predicted"],
+        comparison["organs_measured"],
+        comparison["median_paired_internode_error_mm"],
+        comparison["median_paired_angle_error_deg"],
+        comparison["matched_share"]
+    );
+    assert_eq!(
+        comparison["organs_measured"].as_u64().unwrap() as usize,
+        organs
+    );
+    // Every measured interval is accounted for exactly once, in order.
+    let covered: Vec<u64> = comparison["steps"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|s| {
+            let m = s["measured"].as_array().unwrap();
+            m[0].as_u64().unwrap()..m[1].as_u64().unwrap()
+        })
+        .collect();
+    assert_eq!(covered, (0..angles.len() as u64).collect::<Vec<_>>());
+}

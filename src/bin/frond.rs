@@ -388,6 +388,10 @@ enum Command {
         measures: Option<PathBuf>,
         #[command(flatten)]
         scale: ScaleArgs,
+        /// Read a synthetic dataset's ground truth (gt/branches.json, gt/leaves; metres)
+        /// instead of a reconstruction.
+        #[arg(long, conflicts_with_all = ["scale", "scale_from", "scale_checkerboard", "scale_orbit"])]
+        truth: bool,
         #[arg(long)]
         json: bool,
     },
@@ -506,18 +510,27 @@ fn phyllotaxis(
     reconstruction: &Path,
     measures: Option<&Path>,
     scale: &ScaleArgs,
+    truth: bool,
     json: bool,
 ) -> Result<()> {
-    let organs =
-        frond::traits::io::read_reconstruction(reconstruction, &plant_name(reconstruction))
+    let name = plant_name(reconstruction);
+    let (organs, scale) = if truth {
+        let organs = frond::traits::io::read_ground_truth(reconstruction, &name)
+            .with_context(|| format!("reading the ground truth of {}", reconstruction.display()))?;
+        let mut metres = frond::traits::Scale::factor(1.0)?;
+        metres.source = "synthetic ground truth (metres)".into();
+        (organs, Some(metres))
+    } else {
+        let organs = frond::traits::io::read_reconstruction(reconstruction, &name)
             .with_context(|| format!("reading the reconstruction {}", reconstruction.display()))?;
+        (organs, scale.scale(reconstruction)?)
+    };
     let Some(sequence) = frond::traits::phyllotaxis::stem_sequence(&organs) else {
         bail!(
             "{}: no main stem with at least two organs on it",
             reconstruction.display()
         );
     };
-    let scale = scale.scale(reconstruction)?;
     let comparison = match measures {
         Some(path) => {
             let measures = frond::eval::phyllotaxis::Measures::read(path)?;
@@ -2147,8 +2160,9 @@ fn main() -> Result<()> {
             reconstruction,
             measures,
             scale,
+            truth,
             json,
-        } => phyllotaxis(reconstruction, measures.as_deref(), scale, *json),
+        } => phyllotaxis(reconstruction, measures.as_deref(), scale, *truth, *json),
         Command::Traits {
             reconstruction,
             plant,

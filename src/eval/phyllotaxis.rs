@@ -130,6 +130,10 @@ pub struct PhyllotaxisComparison {
     pub median_angle_error_deg: Option<f64>,
     /// Measured intervals in one-to-one steps, as a share of all measured intervals.
     pub matched_share: f64,
+    /// Medians over every paired step (matches, merges and splits, each comparing the
+    /// combined intervals of its two sides).
+    pub median_paired_internode_error_mm: Option<f64>,
+    pub median_paired_angle_error_deg: Option<f64>,
 }
 
 /// The absolute difference of two angles on the circle, degrees in [0, 180].
@@ -340,6 +344,17 @@ pub fn compare(
         internode_errors_mm.push((p.internode_mm - q.internode_mm).abs());
         angle_errors_deg.push(circular_difference_deg(p.angle_deg, q.angle_deg));
     }
+    let mut paired_internode = Vec::new();
+    let mut paired_angle = Vec::new();
+    for step in steps
+        .iter()
+        .filter(|s| matches!(s.kind, StepKind::Match | StepKind::Merge | StepKind::Split))
+    {
+        let p = combined(&predicted[step.predicted.0..step.predicted.1]);
+        let q = combined(&measured[step.measured.0..step.measured.1]);
+        paired_internode.push((p.internode_mm - q.internode_mm).abs());
+        paired_angle.push(circular_difference_deg(p.angle_deg, q.angle_deg));
+    }
     let organs_predicted = sequence.organs.len();
     let organs_measured = measured.len() + 1;
     PhyllotaxisComparison {
@@ -351,6 +366,8 @@ pub fn compare(
         median_internode_error_mm: median(&internode_errors_mm),
         median_angle_error_deg: median(&angle_errors_deg),
         matched_share: internode_errors_mm.len() as f64 / measured.len() as f64,
+        median_paired_internode_error_mm: median(&paired_internode),
+        median_paired_angle_error_deg: median(&paired_angle),
         internode_errors_mm,
         angle_errors_deg,
         steps,
@@ -387,6 +404,11 @@ impl PhyllotaxisComparison {
             100.0 * self.matched_share,
             fmt(self.median_internode_error_mm),
             fmt(self.median_angle_error_deg)
+        ));
+        out.push_str(&format!(
+            "all paired steps: median internode error {} mm, median angle error {}°\n",
+            fmt(self.median_paired_internode_error_mm),
+            fmt(self.median_paired_angle_error_deg)
         ));
         out.push_str(
             "step\tpredicted\tmeasured\tinternode mm (pred / meas)\tangle ° (pred / meas)\n",
@@ -583,6 +605,7 @@ mod tests {
         assert!(comparison.median_angle_error_deg.unwrap() < 1e-9);
         assert!(comparison.median_internode_error_mm.unwrap() < 1e-9);
         assert!((comparison.matched_share - 1.0).abs() < 1e-12);
+        assert!(comparison.median_paired_angle_error_deg.unwrap() < 1e-9);
         let text = comparison.to_text();
         assert!(text.contains("9 predicted, 9 measured"), "{text}");
     }
