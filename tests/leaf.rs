@@ -631,3 +631,70 @@ fn the_stem_sequence_is_aligned_with_the_truths() {
         .collect();
     assert_eq!(covered, (0..angles.len() as u64).collect::<Vec<_>>());
 }
+
+/// A capture in which no stem is visible (the dataset with every stem and petiole point taken
+/// out of its model) gives the leaves and no branch, with the reason in the report: never a
+/// skeleton made of the pot or the soil.
+#[test]
+fn without_a_visible_stem_the_plant_is_leaves_only() {
+    use frond::scene::{Reconstruction, read_model, write_model};
+    use frond::synth::Part;
+    let dir = tempfile::tempdir().unwrap();
+    let copy = dir.path().join("plant");
+    copy_dir(dataset(), &copy);
+    let truth = frond::eval::read_labelled_points(&copy.join("gt/points.ply")).unwrap();
+    let (ids, parts) = (truth.point_ids.unwrap(), truth.parts.unwrap());
+    let stem: std::collections::HashSet<u64> = ids
+        .iter()
+        .zip(&parts)
+        .filter(|(_, part)| **part == Part::Stem)
+        .map(|(id, _)| *id)
+        .collect();
+    assert!(stem.len() > 500, "{} stem points", stem.len());
+    let model_dir = copy.join("sparse/0");
+    let (model, format) = read_model(&model_dir).unwrap();
+    let points: Vec<_> = model
+        .points()
+        .iter()
+        .filter(|p| !stem.contains(&p.id))
+        .cloned()
+        .collect();
+    let images: Vec<_> = model
+        .images()
+        .iter()
+        .cloned()
+        .map(|mut image| {
+            for keypoint in &mut image.keypoints {
+                if keypoint.point3d_id.is_some_and(|id| stem.contains(&id)) {
+                    keypoint.point3d_id = None;
+                }
+            }
+            image
+        })
+        .collect();
+    let stemless = Reconstruction::from_parts(model.cameras().to_vec(), images, points).unwrap();
+    write_model(&model_dir, &stemless, format).unwrap();
+
+    let out = dir.path().join("out");
+    cargo_bin_cmd!("frond")
+        .arg("reconstruct")
+        .arg(&copy)
+        .arg("--out")
+        .arg(&out)
+        .assert()
+        .success();
+    let report = read_json(&out.join("report.json"));
+    assert_eq!(report["counts"]["branches"], 0, "{}", report["skeleton"]);
+    let reason = report["skeleton_error"].as_str().unwrap_or_default();
+    assert!(
+        reason.contains("no stem visible") || reason.contains("too few"),
+        "{reason:?}"
+    );
+    assert!(
+        report["counts"]["leaves_fitted"].as_u64().unwrap() >= 8,
+        "{}",
+        report["counts"]
+    );
+    let skeleton = read_json(&out.join("skeleton.json"));
+    assert_eq!(skeleton["branches"].as_array().unwrap().len(), 0);
+}

@@ -533,14 +533,14 @@ fn phyllotaxis(
     };
     let comparison = match measures {
         Some(path) => {
-            let measures = frond::eval::phyllotaxis::Measures::read(path)?;
+            let measures = frond::traits::measures::Measures::read(path)?;
             let scale = scale.as_ref().with_context(|| {
                 format!(
                     "{} is in millimetres: give a scale (--scale, --scale-from, --scale-checkerboard or --scale-orbit)",
                     path.display()
                 )
             })?;
-            Some(frond::eval::phyllotaxis::compare(
+            Some(frond::traits::measures::compare(
                 &sequence,
                 1000.0 * scale.metres_per_unit,
                 &measures,

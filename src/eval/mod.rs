@@ -16,7 +16,6 @@ pub mod align;
 pub mod dense;
 pub mod geometry;
 pub mod metrics;
-pub mod phyllotaxis;
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};

@@ -13,6 +13,7 @@ pub mod accuracy;
 pub mod hull;
 pub mod io;
 pub mod marker;
+pub mod measures;
 pub mod phyllotaxis;
 
 use std::collections::BTreeMap;

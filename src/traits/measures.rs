@@ -1,5 +1,5 @@
 //! Phyllotaxis against manual measures: the organ sequence along the predicted main stem
-//! (internodes and signed divergence angles, [`crate::traits::phyllotaxis`]) aligned to a
+//! (internodes and signed divergence angles, [`super::phyllotaxis`]) aligned to a
 //! measured one (ROMI's `measures.json`: `angles` in radians, `internodes` in millimetres,
 //! one entry per interval between successive organs) by dynamic time warping with merges and
 //! splits, as ROMI's own evaluator aligns sequences.
@@ -20,8 +20,15 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use super::EvalError;
-use crate::traits::phyllotaxis::StemSequence;
+use super::TraitsError;
+use super::phyllotaxis::StemSequence;
+
+fn input_error(path: &Path, message: impl std::fmt::Display) -> TraitsError {
+    TraitsError::Input {
+        path: path.display().to_string(),
+        message: message.to_string(),
+    }
+}
 
 /// The most intervals one step merges or splits.
 pub const MAX_RUN: usize = 3;
@@ -41,17 +48,17 @@ pub struct Measures {
 
 impl Measures {
     /// Reads and checks a `measures.json`.
-    pub fn read(path: &Path) -> Result<Self, EvalError> {
+    pub fn read(path: &Path) -> Result<Self, TraitsError> {
         let text = std::fs::read_to_string(path)
-            .map_err(|e| super::input_error(path, format!("cannot read: {e}")))?;
+            .map_err(|e| input_error(path, format!("cannot read: {e}")))?;
         let measures: Self = serde_json::from_str(&text).map_err(|e| {
-            super::input_error(
+            input_error(
                 path,
                 format!("not a measures file (angles, internodes): {e}"),
             )
         })?;
         if measures.angles.len() != measures.internodes.len() {
-            return Err(super::input_error(
+            return Err(input_error(
                 path,
                 format!(
                     "{} angles but {} internodes: one of each per interval",
@@ -61,7 +68,7 @@ impl Measures {
             ));
         }
         if measures.angles.is_empty() {
-            return Err(super::input_error(path, "no intervals"));
+            return Err(input_error(path, "no intervals"));
         }
         if let Some(k) = measures
             .angles
@@ -69,7 +76,7 @@ impl Measures {
             .zip(&measures.internodes)
             .position(|(a, i)| !a.is_finite() || !i.is_finite() || *i < 0.0)
         {
-            return Err(super::input_error(
+            return Err(input_error(
                 path,
                 format!("interval {k}: angle and internode must be finite, internode ≥ 0"),
             ));
