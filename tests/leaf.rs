@@ -47,6 +47,18 @@ fn reconstruction() -> &'static Path {
     .path()
 }
 
+/// `frond reconstruct INPUT --out OUT`, which must succeed; its report.
+fn reconstruct_into(input: &Path, out: &Path) -> Value {
+    cargo_bin_cmd!("frond")
+        .arg("reconstruct")
+        .arg(input)
+        .arg("--out")
+        .arg(out)
+        .assert()
+        .success();
+    read_json(&out.join("report.json"))
+}
+
 fn read_json(path: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -233,14 +245,7 @@ fn missing_photos_are_reported_not_fatal() {
         std::fs::remove_file(photo).unwrap();
     }
     let out = dir.path().join("out");
-    cargo_bin_cmd!("frond")
-        .arg("reconstruct")
-        .arg(&copy)
-        .arg("--out")
-        .arg(&out)
-        .assert()
-        .success();
-    let report = read_json(&out.join("report.json"));
+    let report = reconstruct_into(&copy, &out);
     assert!(report["counts"]["leaves_fitted"].as_u64().unwrap() >= 5);
     let with_images = report["segmentation"]["views_with_images"]
         .as_u64()
@@ -676,14 +681,7 @@ fn without_a_visible_stem_the_plant_is_leaves_only() {
     write_model(&model_dir, &stemless, format).unwrap();
 
     let out = dir.path().join("out");
-    cargo_bin_cmd!("frond")
-        .arg("reconstruct")
-        .arg(&copy)
-        .arg("--out")
-        .arg(&out)
-        .assert()
-        .success();
-    let report = read_json(&out.join("report.json"));
+    let report = reconstruct_into(&copy, &out);
     assert_eq!(report["counts"]["branches"], 0, "{}", report["skeleton"]);
     let reason = report["skeleton_error"].as_str().unwrap_or_default();
     assert!(

@@ -94,32 +94,30 @@ impl Neighbours {
 
     /// Every point within `radius` of `query`, nearest first.
     pub fn within_radius(&self, query: &Point3<f64>, radius: f64) -> Vec<Neighbour> {
-        if self.is_empty() || radius.is_nan() || radius < 0.0 {
-            return Vec::new();
-        }
-        self.tree
-            .query(&[query.x, query.y, query.z])
-            .within::<SquaredEuclidean<f64>>(radius * radius)
-            .execute()
-            .into_iter()
-            .map(|found| Neighbour {
-                index: found.item as usize,
-                distance_squared: found.distance,
-            })
-            .collect()
+        self.within(query, radius, true)
     }
 
     /// The points within `radius` of `query` (inclusive), in no particular order: the same
     /// set as [`Neighbours::within_radius`] without the cost of sorting it.
     pub fn within_radius_unsorted(&self, query: &Point3<f64>, radius: f64) -> Vec<Neighbour> {
+        self.within(query, radius, false)
+    }
+
+    fn within(&self, query: &Point3<f64>, radius: f64, sorted: bool) -> Vec<Neighbour> {
         if self.is_empty() || radius.is_nan() || radius < 0.0 {
             return Vec::new();
         }
-        self.tree
-            .query(&[query.x, query.y, query.z])
-            .within::<SquaredEuclidean<f64>>(radius * radius)
-            .unsorted()
-            .execute()
+        let at = [query.x, query.y, query.z];
+        let search = self
+            .tree
+            .query(&at)
+            .within::<SquaredEuclidean<f64>>(radius * radius);
+        let found = if sorted {
+            search.execute()
+        } else {
+            search.unsorted().execute()
+        };
+        found
             .into_iter()
             .map(|found| Neighbour {
                 index: found.item as usize,

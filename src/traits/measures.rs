@@ -22,6 +22,7 @@ use serde::{Deserialize, Serialize};
 
 use super::TraitsError;
 use super::phyllotaxis::StemSequence;
+use crate::util::stats::median;
 
 fn input_error(path: &Path, message: impl std::fmt::Display) -> TraitsError {
     TraitsError::Input {
@@ -149,20 +150,6 @@ pub fn circular_difference_deg(a: f64, b: f64) -> f64 {
     d.min(360.0 - d)
 }
 
-fn median(values: &[f64]) -> Option<f64> {
-    if values.is_empty() {
-        return None;
-    }
-    let mut v = values.to_vec();
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    Some(if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    })
-}
-
 /// Several consecutive intervals read as one: internodes add, angles add modulo 360°.
 fn combined(intervals: &[Interval]) -> Interval {
     Interval {
@@ -184,7 +171,7 @@ fn step_cost(a: &Interval, b: &Interval, internode_unit_mm: f64) -> f64 {
 /// in order and the total cost.
 pub fn align(predicted: &[Interval], measured: &[Interval]) -> (Vec<AlignmentStep>, f64) {
     let (n, m) = (predicted.len(), measured.len());
-    let unit = median(&measured.iter().map(|i| i.internode_mm).collect::<Vec<_>>())
+    let unit = median(measured.iter().map(|i| i.internode_mm))
         .filter(|u| *u > 0.0)
         .or_else(|| {
             let max = measured.iter().map(|i| i.internode_mm).fold(0.0, f64::max);
@@ -370,11 +357,11 @@ pub fn compare(
         organs_measured,
         organ_count_error: (organs_predicted as f64 - organs_measured as f64)
             / organs_measured as f64,
-        median_internode_error_mm: median(&internode_errors_mm),
-        median_angle_error_deg: median(&angle_errors_deg),
+        median_internode_error_mm: median(internode_errors_mm.iter().copied()),
+        median_angle_error_deg: median(angle_errors_deg.iter().copied()),
         matched_share: internode_errors_mm.len() as f64 / measured.len() as f64,
-        median_paired_internode_error_mm: median(&paired_internode),
-        median_paired_angle_error_deg: median(&paired_angle),
+        median_paired_internode_error_mm: median(paired_internode.iter().copied()),
+        median_paired_angle_error_deg: median(paired_angle.iter().copied()),
         internode_errors_mm,
         angle_errors_deg,
         steps,
