@@ -22,6 +22,7 @@ use frond::pipeline::automatic_skeleton;
 use frond::scene::Scene;
 use frond::segment::{Labels, SegmentOptions, segment_scene};
 use frond::util::progress::NoProgress;
+use frond::util::stats::quantile_sorted;
 use image::{Rgb, RgbImage};
 use nalgebra::Point3;
 
@@ -47,14 +48,11 @@ fn gap_to_true_stems(truth: &GroundTruth, p: &Point3<f64>) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
-/// The 10/25/50/75/90 % quantiles of sorted values, scaled, to two decimals.
+/// The 10/25/50/75/90 % quantiles (nearest rank) of sorted values, scaled, to two decimals.
 fn quantiles(sorted: &[f64], scale: f64) -> String {
     [0.1, 0.25, 0.5, 0.75, 0.9]
         .iter()
-        .map(|f| {
-            let value = sorted[((sorted.len() - 1) as f64 * f) as usize] * scale;
-            format!("{value:.2}")
-        })
+        .map(|&f| format!("{:.2}", quantile_sorted(sorted, f) * scale))
         .collect::<Vec<_>>()
         .join(" ")
 }

@@ -569,21 +569,20 @@ fn phyllotaxis(
         sequence.stem_length * factor,
         sequence.organs.len()
     );
+    let internodes: Vec<String> = sequence
+        .internodes
+        .iter()
+        .map(|v| format!("{:.1}", v * factor))
+        .collect();
+    println!("internodes ({unit}): {}", internodes.join(", "));
+    let angles: Vec<String> = sequence
+        .angles_deg
+        .iter()
+        .map(|v| v.map_or("–".into(), |v| format!("{v:.0}")))
+        .collect();
     println!(
-        "internodes ({unit}): {:?}",
-        sequence
-            .internodes
-            .iter()
-            .map(|v| (v * factor * 10.0).round() / 10.0)
-            .collect::<Vec<_>>()
-    );
-    println!(
-        "divergence angles (deg, counter-clockwise about the stem): {:?}",
-        sequence
-            .angles_deg
-            .iter()
-            .map(|v| v.round())
-            .collect::<Vec<_>>()
+        "divergence angles (deg, counter-clockwise about the stem; – along it): {}",
+        angles.join(", ")
     );
     if let Some(comparison) = comparison {
         print!("{}", comparison.to_text());

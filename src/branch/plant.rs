@@ -13,6 +13,7 @@ use crate::graph::neighbours::Neighbours;
 use crate::model::ModelBranch;
 use crate::segment::foreground::{Foreground, PointClass};
 use crate::segment::{Labels, SegmentLabel, Segmentation};
+use crate::util::geometry::concentric_circle_centre;
 
 /// Indices of the points a skeleton is built from (and branch strokes snap to): points the
 /// foreground found on thin tubes, and the points of segments labelled stem or other (never
@@ -59,24 +60,14 @@ impl Default for TubeTest {
 /// Median distance from a point to its nearest neighbour (over a stride of at most about
 /// 20,000 points); `None` for fewer than two points.
 fn median_spacing(neighbours: &Neighbours) -> Option<f64> {
-    let n = neighbours.len();
-    let stride = (n / 20_000).max(1);
-    let mut nearest: Vec<f64> = (0..n)
-        .step_by(stride)
-        .filter_map(|i| {
-            neighbours
-                .around(i, 2)
-                .into_iter()
-                .find(|found| found.index != i)
-                .map(|found| found.distance())
-        })
-        .filter(|d| d.is_finite())
-        .collect();
-    if nearest.is_empty() {
-        return None;
-    }
-    nearest.sort_by(f64::total_cmp);
-    Some(nearest[nearest.len() / 2])
+    let stride = (neighbours.len() / 20_000).max(1);
+    crate::util::stats::median((0..neighbours.len()).step_by(stride).filter_map(|i| {
+        neighbours
+            .around(i, 2)
+            .into_iter()
+            .find(|found| found.index != i)
+            .map(|found| found.distance())
+    }))
 }
 
 /// The candidates that pass the [`TubeTest`], in their order. All candidates pass when the
@@ -212,37 +203,9 @@ pub fn pot_shape(segmentation: &Segmentation, labels: &Labels) -> Option<PotShap
 /// Height bands of a pot's wall fitted together ([`banded_circle_centre`]).
 const WALL_BANDS: usize = 5;
 
-/// The common centre of concentric circles through planar points in height bands (a tapered
-/// pot's wall: one radius per band): least squares of `x² + y² + D x + E y + F_b = 0`, Kåsa's
-/// algebraic circle fit with one `F` per band. Points are `(x, y, band)`. `None` without enough
-/// points to fix the centre (collinear points, or fewer than three in all).
+/// [`concentric_circle_centre`] with one circle per wall band.
 fn banded_circle_centre(points: &[(f64, f64, usize)]) -> Option<(f64, f64)> {
-    let unknowns = 2 + WALL_BANDS;
-    let mut normal = nalgebra::DMatrix::<f64>::zeros(unknowns, unknowns);
-    let mut rhs = nalgebra::DVector::<f64>::zeros(unknowns);
-    let mut in_band = [0usize; WALL_BANDS];
-    for &(x, y, band) in points {
-        let band = band.min(WALL_BANDS - 1);
-        in_band[band] += 1;
-        let mut row = nalgebra::DVector::<f64>::zeros(unknowns);
-        row[0] = x;
-        row[1] = y;
-        row[2 + band] = 1.0;
-        normal += &row * row.transpose();
-        rhs -= &row * (x * x + y * y);
-    }
-    if points.len() < 3 {
-        return None;
-    }
-    // A band without points leaves its unknown free: pin it to zero.
-    for (band, &count) in in_band.iter().enumerate() {
-        if count == 0 {
-            normal[(2 + band, 2 + band)] = 1.0;
-        }
-    }
-    let solution = normal.lu().solve(&rhs)?;
-    let (cx, cy) = (-0.5 * solution[0], -0.5 * solution[1]);
-    (cx.is_finite() && cy.is_finite()).then_some((cx, cy))
+    concentric_circle_centre(points, WALL_BANDS)
 }
 
 /// The centre of a pot's wall among outliers (floor, soil, pieces of plant taken for pot),

@@ -522,10 +522,10 @@ fn connected_skeleton(
 /// Pieces of tube the kNN graph could not join to the tree (a petiole seen only near its
 /// leaf, a branch behind foliage) each get their own level-set skeleton, rooted at their end
 /// nearest the plant's base, whose main branch is then extended straight back to the tree:
-/// to the point of an existing branch axis (or the root) that is cheapest to reach, as cost
-/// the bridge's length times `1 + 2 (1 − cos θ)`, θ its angle to the piece's own backward
-/// direction (the chord over its first four level widths), among points within 45° of that
-/// direction and within three times the piece's main-branch length. Pieces are taken largest
+/// to the point of an existing branch axis that is cheapest to reach, as cost the bridge's
+/// length times `1 + 8 (1 − cos θ)`, θ its angle to the piece's own backward direction (the
+/// chord over its first four level widths), among points within 40° of that direction and
+/// within three times the piece's main-branch length. Pieces are taken largest
 /// first, so later ones may attach to earlier ones; a piece shorter than the shortest kept
 /// branch or with no such point is left out. Returns how many pieces were added.
 fn bridge_pieces(
@@ -666,8 +666,7 @@ fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> us
         return 0;
     }
     // Axis samples about every half level width, with their radii, branches and tangents.
-    let mut samples: Vec<([f64; 3], f64)> = Vec::new();
-    let mut sample_axes: Vec<(u32, Vector3<f64>)> = Vec::new();
+    let mut samples: Vec<AxisSample> = Vec::new();
     for branch in branches.iter() {
         let cylinder = &branch.cylinder;
         let count =
@@ -679,11 +678,15 @@ fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> us
             .enumerate()
         {
             let fraction = k as f64 / (count - 1) as f64;
-            samples.push(([p.x, p.y, p.z], cylinder.radius_at(fraction)));
-            sample_axes.push((branch.id, *tangent));
+            samples.push(AxisSample {
+                point: *p,
+                radius: cylinder.radius_at(fraction),
+                branch: branch.id,
+                tangent: *tangent,
+            });
         }
     }
-    let Ok(axis_neighbours) = Neighbours::new(samples.iter().map(|s| Point3::from(s.0))) else {
+    let Ok(axis_neighbours) = Neighbours::new(samples.iter().map(|s| s.point)) else {
         return 0;
     };
     let unexplained: Vec<bool> = points
@@ -695,7 +698,7 @@ fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> us
             }
             axis_neighbours
                 .nearest(p)
-                .is_some_and(|f| f.distance() > samples[f.index].1 + level_width)
+                .is_some_and(|f| f.distance() > samples[f.index].radius + level_width)
         })
         .collect();
     let mut groups = UnionFind::new(points.len());
@@ -772,13 +775,7 @@ fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> us
             polyline.reverse();
         }
         let polyline = smooth(&polyline);
-        if runs_beside_an_axis(
-            &polyline,
-            &samples,
-            &sample_axes,
-            &axis_neighbours,
-            level_width,
-        ) {
+        if runs_beside_an_axis(&polyline, &samples, &axis_neighbours, level_width) {
             continue;
         }
         let origin = polyline[0];
@@ -834,6 +831,15 @@ fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> us
     added
 }
 
+/// A point of a branch axis, as [`recover_missed_tubes`] looks it up.
+#[derive(Clone, Copy)]
+struct AxisSample {
+    point: Point3<f64>,
+    radius: f64,
+    branch: u32,
+    tangent: Vector3<f64>,
+}
+
 /// A tube found beside an existing branch and parallel to it along most of its length is
 /// that branch's twin, not an organ of its own: stereo smears a thin organ across the
 /// viewing direction into a band wider than its fitted radius, and the band's far edge is
@@ -843,8 +849,7 @@ fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> us
 /// direction there is within 25° of that axis.
 fn runs_beside_an_axis(
     polyline: &[Point3<f64>],
-    samples: &[([f64; 3], f64)],
-    sample_axes: &[(u32, Vector3<f64>)],
+    samples: &[AxisSample],
     axis_neighbours: &Neighbours,
     level_width: f64,
 ) -> bool {
@@ -866,8 +871,12 @@ fn runs_beside_an_axis(
         let Some(nearest) = axis_neighbours.nearest(p) else {
             continue;
         };
-        let (branch, tangent) = sample_axes[nearest.index];
-        let radius = samples[nearest.index].1;
+        let AxisSample {
+            branch,
+            tangent,
+            radius,
+            ..
+        } = samples[nearest.index];
         if nearest.distance() <= 2.0 * (radius + level_width)
             && direction.dot(&tangent).abs() >= cos_max
         {

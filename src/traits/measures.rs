@@ -86,11 +86,12 @@ impl Measures {
     }
 }
 
-/// One interval: internode (mm) and divergence angle (degrees, [0, 360)).
+/// One interval: internode (mm) and divergence angle (degrees, [0, 360); `None` where a
+/// predicted organ runs along the stem and has no azimuth).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Interval {
     pub internode_mm: f64,
-    pub angle_deg: f64,
+    pub angle_deg: Option<f64>,
 }
 
 /// What one alignment step did.
@@ -131,7 +132,8 @@ pub struct PhyllotaxisComparison {
     pub organ_count_error: f64,
     pub steps: Vec<AlignmentStep>,
     pub total_cost: f64,
-    /// Per matched interval (one-to-one steps), in sequence order.
+    /// Per matched interval (one-to-one steps), in sequence order (angles where both are
+    /// known).
     pub internode_errors_mm: Vec<f64>,
     pub angle_errors_deg: Vec<f64>,
     pub median_internode_error_mm: Option<f64>,
@@ -150,20 +152,27 @@ pub fn circular_difference_deg(a: f64, b: f64) -> f64 {
     d.min(360.0 - d)
 }
 
-/// Several consecutive intervals read as one: internodes add, angles add modulo 360°.
+/// Several consecutive intervals read as one: internodes add, angles add modulo 360° (an
+/// unknown angle makes the sum unknown).
 fn combined(intervals: &[Interval]) -> Interval {
     Interval {
         internode_mm: intervals.iter().map(|i| i.internode_mm).sum(),
         angle_deg: intervals
             .iter()
             .map(|i| i.angle_deg)
-            .sum::<f64>()
-            .rem_euclid(360.0),
+            .sum::<Option<f64>>()
+            .map(|a| a.rem_euclid(360.0)),
     }
 }
 
+/// The angle difference of two intervals, when both angles are known.
+fn angle_difference(a: &Interval, b: &Interval) -> Option<f64> {
+    Some(circular_difference_deg(a.angle_deg?, b.angle_deg?))
+}
+
+/// An unknown angle costs nothing: the internodes still place the step.
 fn step_cost(a: &Interval, b: &Interval, internode_unit_mm: f64) -> f64 {
-    circular_difference_deg(a.angle_deg, b.angle_deg) / ANGLE_UNIT_DEG
+    angle_difference(a, b).unwrap_or(0.0) / ANGLE_UNIT_DEG
         + (a.internode_mm - b.internode_mm).abs() / internode_unit_mm
 }
 
@@ -304,7 +313,7 @@ pub fn compare(
         .zip(&measures.internodes)
         .map(|(a, i)| Interval {
             internode_mm: *i,
-            angle_deg: a.to_degrees().rem_euclid(360.0),
+            angle_deg: Some(a.to_degrees().rem_euclid(360.0)),
         })
         .collect();
     let read = |mirror: bool| -> Vec<Interval> {
@@ -314,11 +323,13 @@ pub fn compare(
             .zip(&sequence.angles_deg)
             .map(|(i, a)| Interval {
                 internode_mm: i * millimetres_per_unit,
-                angle_deg: if mirror {
-                    (360.0 - a).rem_euclid(360.0)
-                } else {
-                    *a
-                },
+                angle_deg: a.map(|a| {
+                    if mirror {
+                        (360.0 - a).rem_euclid(360.0)
+                    } else {
+                        a
+                    }
+                }),
             })
             .collect()
     };
@@ -331,23 +342,23 @@ pub fn compare(
     } else {
         ("counter_clockwise", ccw, a, cost_a)
     };
-    let mut internode_errors_mm = Vec::new();
-    let mut angle_errors_deg = Vec::new();
-    for step in steps.iter().filter(|s| s.kind == StepKind::Match) {
-        let (p, q) = (&predicted[step.predicted.0], &measured[step.measured.0]);
-        internode_errors_mm.push((p.internode_mm - q.internode_mm).abs());
-        angle_errors_deg.push(circular_difference_deg(p.angle_deg, q.angle_deg));
-    }
-    let mut paired_internode = Vec::new();
-    let mut paired_angle = Vec::new();
+    // Errors of every paired step, and of the one-to-one matches among them.
+    let (mut internode_errors_mm, mut angle_errors_deg) = (Vec::new(), Vec::new());
+    let (mut paired_internode, mut paired_angle) = (Vec::new(), Vec::new());
     for step in steps
         .iter()
         .filter(|s| matches!(s.kind, StepKind::Match | StepKind::Merge | StepKind::Split))
     {
         let p = combined(&predicted[step.predicted.0..step.predicted.1]);
         let q = combined(&measured[step.measured.0..step.measured.1]);
-        paired_internode.push((p.internode_mm - q.internode_mm).abs());
-        paired_angle.push(circular_difference_deg(p.angle_deg, q.angle_deg));
+        let internode = (p.internode_mm - q.internode_mm).abs();
+        let angle = angle_difference(&p, &q);
+        paired_internode.push(internode);
+        paired_angle.extend(angle);
+        if step.kind == StepKind::Match {
+            internode_errors_mm.push(internode);
+            angle_errors_deg.extend(angle);
+        }
     }
     let organs_predicted = sequence.organs.len();
     let organs_measured = measured.len() + 1;
@@ -426,8 +437,8 @@ impl PhyllotaxisComparison {
                 range(step.measured),
                 fmt(p.map(|p| p.internode_mm)),
                 fmt(q.map(|q| q.internode_mm)),
-                fmt(p.map(|p| p.angle_deg)),
-                fmt(q.map(|q| q.angle_deg)),
+                fmt(p.and_then(|p| p.angle_deg)),
+                fmt(q.and_then(|q| q.angle_deg)),
             ));
         }
         out
@@ -443,7 +454,7 @@ mod tests {
             .iter()
             .map(|(i, a)| Interval {
                 internode_mm: *i,
-                angle_deg: *a,
+                angle_deg: Some(*a),
             })
             .collect()
     }
@@ -466,7 +477,7 @@ mod tests {
         (0..n)
             .map(|_| Interval {
                 internode_mm: 3.0 + 20.0 * next(),
-                angle_deg: 100.0 + 80.0 * next(),
+                angle_deg: Some(100.0 + 80.0 * next()),
             })
             .collect()
     }
@@ -494,7 +505,10 @@ mod tests {
             4..5,
             intervals(&[
                 (0.4 * t.internode_mm, 30.0),
-                (0.6 * t.internode_mm, (t.angle_deg - 30.0).rem_euclid(360.0)),
+                (
+                    0.6 * t.internode_mm,
+                    (t.angle_deg.unwrap() - 30.0).rem_euclid(360.0),
+                ),
             ]),
         );
         let (steps, cost) = align(&extra, &truth);
@@ -558,7 +572,9 @@ mod tests {
         assert!((circular_difference_deg(10.0, 350.0) - 20.0).abs() < 1e-12);
         assert!((circular_difference_deg(-90.0, 270.0)).abs() < 1e-12);
         let c = combined(&intervals(&[(1.0, 250.0), (2.0, 200.0)]));
-        assert!((c.angle_deg - 90.0).abs() < 1e-12 && (c.internode_mm - 3.0).abs() < 1e-12);
+        assert!(
+            (c.angle_deg.unwrap() - 90.0).abs() < 1e-12 && (c.internode_mm - 3.0).abs() < 1e-12
+        );
     }
 
     #[test]
@@ -566,7 +582,10 @@ mod tests {
         use crate::traits::phyllotaxis::{InsertedOrgan, OrganKind, StemSequence};
         let truth = sequence(8, 4);
         let measures = Measures {
-            angles: truth.iter().map(|i| i.angle_deg.to_radians()).collect(),
+            angles: truth
+                .iter()
+                .map(|i| i.angle_deg.unwrap().to_radians())
+                .collect(),
             internodes: truth.iter().map(|i| i.internode_mm).collect(),
         };
         // The prediction in model units of 2 mm, turning the other way.
@@ -589,7 +608,10 @@ mod tests {
             stem_length: position,
             organs,
             internodes: truth.iter().map(|i| i.internode_mm / 2.0).collect(),
-            angles_deg: truth.iter().map(|i| 360.0 - i.angle_deg).collect(),
+            angles_deg: truth
+                .iter()
+                .map(|i| i.angle_deg.map(|a| 360.0 - a))
+                .collect(),
         };
         let comparison = compare(&predicted, 2.0, &measures);
         assert_eq!(comparison.sense, "clockwise");

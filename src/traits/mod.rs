@@ -118,13 +118,11 @@ impl Scale {
         scale.source = format!("{metres} m between {a} and {b} ({units} model units)");
         Ok(scale)
     }
-}
 
-impl Scale {
     /// The cameras travelled a circle of known radius (a turntable, a rail orbit, ROMI's plant
-    /// imager): the circle is fitted to the camera centres (plane by PCA, then an algebraic
-    /// least-squares circle in that plane, so a partial arc works) and its radius in model
-    /// units set against `radius_metres`. Also returns the fit's RMS residual as a share of
+    /// imager): the circle is fitted to the camera centres (plane by PCA, then the centre of
+    /// an algebraic least-squares circle in that plane, so a partial arc works, and the mean
+    /// distance from it) and its radius in model units set against `radius_metres`. Also returns the fit's RMS residual as a share of
     /// the radius, so a path that is no circle is visible.
     pub fn from_camera_orbit(
         centres_world: &[Point3<f64>],
@@ -165,25 +163,18 @@ impl Scale {
                 Point2::new(d.dot(&u), d.dot(&v))
             })
             .collect();
-        // Kåsa: x² + y² = 2 a x + 2 b y + c, least squares in (a, b, c).
-        let mut normal = nalgebra::Matrix3::<f64>::zeros();
-        let mut rhs = Vector3::zeros();
-        for p in &planar {
-            let row = Vector3::new(2.0 * p.x, 2.0 * p.y, 1.0);
-            normal += row * row.transpose();
-            rhs += row * (p.x * p.x + p.y * p.y);
-        }
-        let solution = normal.lu().solve(&rhs).ok_or_else(|| {
-            TraitsError::Scale("the camera centres lie on a line, not a circle".into())
-        })?;
-        let centre = Point2::new(solution.x, solution.y);
-        let radius_squared = solution.z + centre.coords.norm_squared();
-        if !positive(radius_squared) {
+        let on_circle: Vec<(f64, f64, usize)> = planar.iter().map(|p| (p.x, p.y, 0)).collect();
+        let (cx, cy) =
+            crate::util::geometry::concentric_circle_centre(&on_circle, 1).ok_or_else(|| {
+                TraitsError::Scale("the camera centres lie on a line, not a circle".into())
+            })?;
+        let centre = Point2::new(cx, cy);
+        let radius = planar.iter().map(|p| (p - centre).norm()).sum::<f64>() / n;
+        if !positive(radius) {
             return Err(TraitsError::Scale(
                 "the camera centres fit no circle".into(),
             ));
         }
-        let radius = radius_squared.sqrt();
         let residual = (planar
             .iter()
             .map(|p| ((p - centre).norm() - radius).powi(2))
@@ -660,49 +651,24 @@ pub fn plant_traits(organs: &PlantOrgans, scale: Option<&Scale>) -> TraitTable {
     // Internodes and divergence angles along every axis, in insertion order: the organs
     // inserted on it are its child branches and the leaves attached to it directly.
     for axis in &organs.branches {
-        let mut inserted: Vec<(f64, Vector3<f64>)> = Vec::new();
-        for child in organs.branches.iter().filter(|b| b.parent == Some(axis.id)) {
-            if let Some(d) = initial_direction(child) {
-                inserted.push((child.parent_fraction, d));
-            }
-        }
-        for leaf in &organs.leaves {
-            if let (Some((branch, fraction)), Some(t)) =
-                (leaf.branch, leaf_traits_by_id.get(&leaf.id))
-                && branch == axis.id
-                && let Some(d) = (t.tip_world - t.base_world).try_normalize(1e-15)
-            {
-                inserted.push((fraction, d));
-            }
-        }
-        if inserted.len() < 2 {
-            continue;
-        }
-        inserted.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let length = branch_length(axis);
+        let inserted = phyllotaxis::inserted_on(axis, organs, |leaf| {
+            let t = leaf_traits_by_id.get(&leaf.id)?;
+            (t.tip_world - t.base_world).try_normalize(1e-15)
+        });
         for (k, pair) in inserted.windows(2).enumerate() {
             let organ_id = format!("{}/internode_{:02}", branch_organ_id(axis.id), k + 1);
-            push(
-                &organ_id,
-                "internode",
-                "length",
-                Kind::Length,
-                (pair[1].0 - pair[0].0) * length,
-            );
-            let at = 0.5 * (pair[0].0 + pair[1].0);
-            if let Some((_, tangent)) = polyline_at(&axis.centerline, at) {
-                let project =
-                    |d: &Vector3<f64>| (d - tangent * d.dot(&tangent)).try_normalize(1e-9);
-                if let (Some(a), Some(b)) = (project(&pair[0].1), project(&pair[1].1)) {
-                    let angle = a.dot(&b).clamp(-1.0, 1.0).acos().to_degrees();
-                    push(
-                        &organ_id,
-                        "internode",
-                        "divergence_angle",
-                        Kind::Angle,
-                        angle,
-                    );
-                }
+            let (internode, signed) = phyllotaxis::interval(axis, &pair[0], &pair[1]);
+            push(&organ_id, "internode", "length", Kind::Length, internode);
+            if let Some(signed) = signed {
+                // Unsigned here: the table does not say which way a spiral turns.
+                let angle = signed.min(360.0 - signed);
+                push(
+                    &organ_id,
+                    "internode",
+                    "divergence_angle",
+                    Kind::Angle,
+                    angle,
+                );
             }
         }
     }

@@ -7,14 +7,16 @@
 //! 137.5° reads 137.5° in one sense and 222.5° in the other; unsigned angles cannot tell a
 //! spiral from its mirror or a 90° step from a 270° one.
 
-use nalgebra::Vector3;
+use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::{PlantOrgans, branch_length, initial_direction, leaf_traits, polyline_at, positive};
+use super::{
+    LeafOrgan, PlantOrgans, branch_length, initial_direction, leaf_traits, polyline_at, positive,
+};
 use crate::branch::plant::SkeletonRecord;
 
 /// What an inserted organ is.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum OrganKind {
     Branch,
@@ -42,8 +44,8 @@ pub struct StemSequence {
     /// `organs.len() - 1` internodes (model units).
     pub internodes: Vec<f64>,
     /// `organs.len() - 1` signed divergence angles, degrees in [0, 360), counter-clockwise
-    /// about the stem tangent (base → tip).
-    pub angles_deg: Vec<f64>,
+    /// about the stem tangent (base → tip); `None` where an organ runs along the stem.
+    pub angles_deg: Vec<Option<f64>>,
 }
 
 /// The main stem: the longest root branch.
@@ -52,6 +54,66 @@ pub fn main_stem(branches: &[SkeletonRecord]) -> Option<&SkeletonRecord> {
         .iter()
         .filter(|b| b.parent.is_none())
         .max_by(|a, b| branch_length(a).total_cmp(&branch_length(b)))
+}
+
+/// An organ inserted on an axis, with its initial direction (world frame).
+pub(crate) struct Inserted {
+    /// Where along the axis (0 = base, 1 = tip).
+    pub fraction: f64,
+    pub kind: OrganKind,
+    pub id: u32,
+    pub direction: Vector3<f64>,
+}
+
+/// The organs inserted on `axis`: its child branches and the leaves attached to it directly
+/// (`leaf_direction` gives a leaf's base → tip direction), in insertion order (ties by kind
+/// and id).
+pub(crate) fn inserted_on(
+    axis: &SkeletonRecord,
+    organs: &PlantOrgans,
+    leaf_direction: impl Fn(&LeafOrgan) -> Option<Vector3<f64>>,
+) -> Vec<Inserted> {
+    let mut inserted: Vec<Inserted> = Vec::new();
+    for child in organs.branches.iter().filter(|b| b.parent == Some(axis.id)) {
+        if let Some(direction) = initial_direction(child) {
+            inserted.push(Inserted {
+                fraction: child.parent_fraction,
+                kind: OrganKind::Branch,
+                id: child.id,
+                direction,
+            });
+        }
+    }
+    for leaf in &organs.leaves {
+        if let Some((branch, fraction)) = leaf.branch
+            && branch == axis.id
+            && let Some(direction) = leaf_direction(leaf)
+        {
+            inserted.push(Inserted {
+                fraction,
+                kind: OrganKind::Leaf,
+                id: leaf.id,
+                direction,
+            });
+        }
+    }
+    inserted.sort_by(|a, b| {
+        a.fraction
+            .total_cmp(&b.fraction)
+            .then(a.kind.cmp(&b.kind))
+            .then(a.id.cmp(&b.id))
+    });
+    inserted
+}
+
+/// The internode (model units) from organ `a` to the next organ `b` on `axis`, and their
+/// signed divergence angle about the axis's tangent halfway between them (`None` where the
+/// axis has no tangent or an organ runs along it).
+pub(crate) fn interval(axis: &SkeletonRecord, a: &Inserted, b: &Inserted) -> (f64, Option<f64>) {
+    let internode = (b.fraction - a.fraction) * branch_length(axis);
+    let angle = polyline_at(&axis.centerline, 0.5 * (a.fraction + b.fraction))
+        .and_then(|(_, tangent)| signed_angle_deg(&a.direction, &b.direction, &tangent));
+    (internode, angle)
 }
 
 /// The organ sequence along the main stem; `None` without a stem of positive length or with
@@ -66,51 +128,27 @@ pub fn stem_sequence(organs: &PlantOrgans) -> Option<StemSequence> {
         .up_world
         .try_normalize(1e-12)
         .unwrap_or_else(Vector3::z);
-    // (fraction, kind, id, direction)
-    let mut inserted: Vec<(f64, OrganKind, u32, Vector3<f64>)> = Vec::new();
-    for child in organs.branches.iter().filter(|b| b.parent == Some(stem.id)) {
-        if let Some(d) = initial_direction(child) {
-            inserted.push((child.parent_fraction, OrganKind::Branch, child.id, d));
-        }
-    }
-    let stem_base = stem
-        .centerline
-        .first()
-        .map(|c| nalgebra::Point3::from(*c))?;
-    for leaf in &organs.leaves {
-        let Some((branch, fraction)) = leaf.branch else {
-            continue;
-        };
-        if branch != stem.id {
-            continue;
-        }
-        if let Some(t) = leaf_traits(&leaf.mesh, leaf.base_world, &stem_base, &up)
-            && let Some(d) = (t.tip_world - t.base_world).try_normalize(1e-15)
-        {
-            inserted.push((fraction, OrganKind::Leaf, leaf.id, d));
-        }
-    }
+    let stem_base = Point3::from(*stem.centerline.first()?);
+    let inserted = inserted_on(stem, organs, |leaf| {
+        let t = leaf_traits(&leaf.mesh, leaf.base_world, &stem_base, &up)?;
+        (t.tip_world - t.base_world).try_normalize(1e-15)
+    });
     if inserted.len() < 2 {
         return None;
     }
-    inserted.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.2.cmp(&b.2)));
-    let mut internodes = Vec::with_capacity(inserted.len() - 1);
-    let mut angles_deg = Vec::with_capacity(inserted.len() - 1);
-    for pair in inserted.windows(2) {
-        internodes.push((pair[1].0 - pair[0].0) * length);
-        let at = 0.5 * (pair[0].0 + pair[1].0);
-        let tangent = polyline_at(&stem.centerline, at).map_or(up, |(_, t)| t);
-        angles_deg.push(signed_angle_deg(&pair[0].3, &pair[1].3, &tangent).unwrap_or(0.0));
-    }
+    let (internodes, angles_deg) = inserted
+        .windows(2)
+        .map(|pair| interval(stem, &pair[0], &pair[1]))
+        .unzip();
     Some(StemSequence {
         stem: stem.id,
         stem_length: length,
         organs: inserted
             .iter()
-            .map(|(fraction, kind, id, _)| InsertedOrgan {
-                kind: *kind,
-                id: *id,
-                position: fraction * length,
+            .map(|o| InsertedOrgan {
+                kind: o.kind,
+                id: o.id,
+                position: o.fraction * length,
             })
             .collect(),
         internodes,
@@ -185,7 +223,7 @@ mod tests {
             assert!((internode - 0.15).abs() < 1e-9, "{internode}");
         }
         for angle in &sequence.angles_deg {
-            assert!((angle - 137.5).abs() < 1e-6, "{angle}");
+            assert!((angle.unwrap() - 137.5).abs() < 1e-6, "{angle:?}");
         }
         // Its mirror image turns the other way.
         let mirrored: Vec<SkeletonRecord> = branches
@@ -203,7 +241,7 @@ mod tests {
         };
         let sequence = stem_sequence(&organs).unwrap();
         for angle in &sequence.angles_deg {
-            assert!((angle - 222.5).abs() < 1e-6, "{angle}");
+            assert!((angle.unwrap() - 222.5).abs() < 1e-6, "{angle:?}");
         }
     }
 

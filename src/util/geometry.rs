@@ -70,6 +70,44 @@ pub fn closest_point_to_lines(lines: &[(Point3<f64>, Vector3<f64>)]) -> Option<P
         .then(|| Point3::from(solved))
 }
 
+/// The common centre of concentric circles through planar points `(x, y, circle)` (e.g. a
+/// tapered pot's wall in height bands, one radius per band; or one circle for all): least
+/// squares of `x² + y² + D x + E y + F_c = 0`, Kåsa's algebraic circle fit with one `F` per
+/// circle, so an arc is enough. Circle indices at or above `circles` count as the last.
+/// `None` without enough points to fix the centre (collinear points, fewer than three).
+pub fn concentric_circle_centre(
+    points: &[(f64, f64, usize)],
+    circles: usize,
+) -> Option<(f64, f64)> {
+    let circles = circles.max(1);
+    let unknowns = 2 + circles;
+    let mut normal = nalgebra::DMatrix::<f64>::zeros(unknowns, unknowns);
+    let mut rhs = nalgebra::DVector::<f64>::zeros(unknowns);
+    let mut on_circle = vec![0usize; circles];
+    for &(x, y, circle) in points {
+        let circle = circle.min(circles - 1);
+        on_circle[circle] += 1;
+        let mut row = nalgebra::DVector::<f64>::zeros(unknowns);
+        row[0] = x;
+        row[1] = y;
+        row[2 + circle] = 1.0;
+        normal += &row * row.transpose();
+        rhs -= &row * (x * x + y * y);
+    }
+    if points.len() < 3 {
+        return None;
+    }
+    // A circle without points leaves its unknown free: pin it to zero.
+    for (circle, &count) in on_circle.iter().enumerate() {
+        if count == 0 {
+            normal[(2 + circle, 2 + circle)] = 1.0;
+        }
+    }
+    let solution = normal.lu().solve(&rhs)?;
+    let (cx, cy) = (-0.5 * solution[0], -0.5 * solution[1]);
+    (cx.is_finite() && cy.is_finite()).then_some((cx, cy))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -138,7 +138,6 @@ enum Dialog {
     ConfirmClose,
 }
 
-/// The application state.
 /// Branch support measured for one state of the session (see `FrondApp::branches_ui`).
 struct SupportCache {
     /// (history length, applied commands) when measured.
@@ -147,6 +146,7 @@ struct SupportCache {
     support: Vec<frond::branch::plant::BranchSupport>,
 }
 
+/// The application state.
 pub struct FrondApp {
     config: Option<ConfigDir>,
     recent: Vec<PathBuf>,
