@@ -14,6 +14,7 @@
 //! it ([`attach`]).
 
 pub mod attach;
+pub mod compound;
 pub mod handles;
 pub mod plant;
 pub mod skeleton;

@@ -678,6 +678,10 @@ struct LeafRecord {
     width: f64,
     area: f64,
     branch: u32,
+    /// The compound leaf (its rachis's branch id) a leaflet belongs to; absent for simple
+    /// leaves.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    compound_leaf: Option<u32>,
     normal: [f64; 3],
     base: [f64; 3],
     tip: [f64; 3],
@@ -763,6 +767,7 @@ fn write_ground_truth(
             width: leaf.geometry.width,
             area: leaf.mesh.area(),
             branch: leaf.branch,
+            compound_leaf: leaf.compound_leaf,
             normal: [normal.x, normal.y, normal.z],
             base: [base.x, base.y, base.z],
             tip: [tip.x, tip.y, tip.z],
