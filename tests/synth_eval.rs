@@ -124,6 +124,7 @@ fn score_prediction(relabel: impl Fn(usize, i64) -> i64) -> EvalReport {
             texture: None,
             color: [0.2, 0.6, 0.2, 1.0],
             double_sided: true,
+            group: None,
         })
         .collect();
     std::fs::write(out.path().join("plant.glb"), write_glb(&nodes, &[], "test")).unwrap();

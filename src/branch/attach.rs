@@ -6,6 +6,7 @@
 use nalgebra::{Point2, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
+use super::compound::LeafOnBranch;
 use super::{BranchTree, GeneralizedCylinder, Spline};
 use crate::leaf::fit::{Affine2, LeafFrame};
 use crate::leaf::{LeafReconstruction, LeafTemplate};
@@ -75,6 +76,9 @@ pub struct Attachment {
     pub average: Option<AverageLeaf>,
     /// Leaves whose base already touches a branch.
     pub touching: usize,
+    /// Where every fitted leaf sits on the branch it is attached to (directly or by its
+    /// petiole).
+    pub on_branches: Vec<LeafOnBranch>,
 }
 
 /// The template laid flat in a frame with its base at the origin, scaled to `length` and
@@ -133,6 +137,13 @@ pub fn attach_leaves(
             continue;
         };
         attachment_radii.push(anchor.radius);
+        attachment.on_branches.push(LeafOnBranch {
+            leaf: leaf.segment,
+            branch: anchor.branch,
+            parent_fraction: anchor.fraction,
+            base_world: leaf.fit.base,
+            tip_world: leaf.fit.tip,
+        });
         if anchor.distance <= TOUCHING_RADII * anchor.radius.max(1e-9) {
             attachment.touching += 1;
             continue;

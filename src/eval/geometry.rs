@@ -68,7 +68,7 @@ pub fn normal_angle_deg(a: &TriMesh, b: &TriMesh) -> f64 {
 }
 
 /// Distance from `p` to a set of polylines.
-fn distance_to_polylines(p: &Point3<f64>, lines: &[Vec<Point3<f64>>]) -> f64 {
+pub(crate) fn distance_to_polylines(p: &Point3<f64>, lines: &[Vec<Point3<f64>>]) -> f64 {
     lines
         .iter()
         .flat_map(|line| {

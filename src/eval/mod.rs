@@ -13,6 +13,7 @@
 //! Takes a synthetic dataset's `gt/` and a reconstruction folder; returns an [`EvalReport`].
 
 pub mod align;
+pub mod compound;
 pub mod dense;
 pub mod geometry;
 pub mod metrics;
@@ -111,6 +112,9 @@ pub struct GtLeafRecord {
     /// The branch (petiole or twig) the leaf grows from, when the dataset says.
     #[serde(default)]
     pub branch: Option<u32>,
+    /// For a leaflet: its compound leaf (the rachis's branch id).
+    #[serde(default)]
+    pub compound_leaf: Option<u32>,
 }
 
 pub use crate::branch::plant::{SkeletonFile, SkeletonRecord};
@@ -166,6 +170,15 @@ pub struct Prediction {
     pub leaf_meshes: BTreeMap<i64, TriMesh>,
     pub branch_meshes: usize,
     pub skeleton: Option<Vec<SkeletonRecord>>,
+    /// The compound leaves `report.json` lists (empty without one).
+    pub compound_leaves: Vec<crate::branch::compound::CompoundLeaf>,
+}
+
+/// The part of `report.json` the evaluation reads.
+#[derive(Deserialize)]
+struct ReportCompoundLeaves {
+    #[serde(default)]
+    compound_leaves: Vec<crate::branch::compound::CompoundLeaf>,
 }
 
 impl Prediction {
@@ -197,11 +210,18 @@ impl Prediction {
         } else {
             None
         };
+        let report_path = out.join("report.json");
+        let compound_leaves = if report_path.is_file() {
+            read_json::<ReportCompoundLeaves>(&report_path)?.compound_leaves
+        } else {
+            Vec::new()
+        };
         Ok(Self {
             points,
             leaf_meshes,
             branch_meshes,
             skeleton,
+            compound_leaves,
         })
     }
 
@@ -344,6 +364,8 @@ pub struct EvalReport {
     pub area_relative_error: Summary,
     pub normal_angle_deg: Summary,
     pub skeleton: Option<SkeletonScores>,
+    /// Leaflets on their rachis (when the truth has compound leaves).
+    pub compound: Option<compound::CompoundScores>,
     pub options: EvalOptions,
 }
 
@@ -523,6 +545,20 @@ pub fn evaluate(
         let petioles = geometry::petiole_ids(&gt.branches, &gt.leaves);
         geometry::score_skeleton(&gt.branches, &petioles, skeleton)
     });
+    let leaflet_rachis: BTreeMap<i64, u32> = gt
+        .leaves
+        .iter()
+        .filter_map(|(record, _)| Some((record.id as i64, record.compound_leaf?)))
+        .collect();
+    let compound = (!leaflet_rachis.is_empty()).then(|| {
+        compound::score_compound(
+            &leaflet_rachis,
+            &gt.branches,
+            &leaves.matches,
+            &pred.compound_leaves,
+            pred.skeleton.as_deref().unwrap_or(&[]),
+        )
+    });
     Ok(EvalReport {
         points_scored: n,
         pairing,
@@ -535,6 +571,7 @@ pub fn evaluate(
         leaves,
         leaf_geometry,
         skeleton,
+        compound,
         options: options.clone(),
     })
 }
@@ -610,6 +647,19 @@ impl EvalReport {
                 k.length.true_petiole_length,
                 k.length.precision,
                 k.length.predicted_length
+            );
+        }
+        if let Some(c) = &self.compound {
+            let _ = writeln!(
+                s,
+                "compound leaves:   {} predicted ({} on a true rachis) for {} true ({} found); leaflets on the right rachis {:.3} ({}/{} matched)",
+                c.predicted_compound_leaves,
+                c.predicted_on_a_true_rachis,
+                c.true_compound_leaves,
+                c.true_rachises_found,
+                c.right_rachis_share,
+                c.leaflets_on_right_rachis,
+                c.leaflets_matched
             );
         }
         s

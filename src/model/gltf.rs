@@ -23,6 +23,9 @@ pub struct ExportNode<'a> {
     /// Base colour when there is no texture (linear RGBA).
     pub color: [f32; 4],
     pub double_sided: bool,
+    /// The group node this node is a child of (e.g. `compound_leaf_002` for a leaflet and its
+    /// rachis); `None` for a scene root.
+    pub group: Option<String>,
 }
 
 /// A mesh read back from a glb, by node name, in world coordinates.
@@ -30,6 +33,8 @@ pub struct ExportNode<'a> {
 pub struct NamedMesh {
     pub name: String,
     pub mesh: TriMesh,
+    /// The name of the node's parent, if it has one.
+    pub group: Option<String>,
 }
 
 /// glb import failures.
@@ -370,8 +375,9 @@ impl GlbBuilder {
     }
 }
 
-/// Encodes nodes as a glb (one single-primitive mesh per node, every node a scene root);
-/// `textures` are embedded once each as PNG.
+/// Encodes nodes as a glb (one single-primitive mesh per node; a node is a scene root, or a
+/// child of its group's node, which is a scene root without a mesh); `textures` are embedded
+/// once each as PNG.
 pub fn write_glb(nodes: &[ExportNode<'_>], textures: &[&RgbaImage], generator: &str) -> Vec<u8> {
     write_glb_with_extras(nodes, textures, generator, Value::Null)
 }
@@ -386,6 +392,7 @@ pub fn write_glb_with_extras(
     let mut builder = GlbBuilder::new(generator);
     builder.set_asset_extras(asset_extras);
     let texture_ids: Vec<usize> = textures.iter().map(|t| builder.add_texture(t)).collect();
+    let mut groups: Vec<(String, Vec<usize>)> = Vec::new();
     for node in nodes {
         let texture = node.texture.and_then(|t| texture_ids.get(t).copied());
         let primitive = PrimitiveSpec {
@@ -404,6 +411,16 @@ pub fn write_glb_with_extras(
             continue;
         };
         let index = builder.add_node(json!({"name": node.name, "mesh": mesh}));
+        match &node.group {
+            Some(group) => match groups.iter_mut().find(|(name, _)| name == group) {
+                Some((_, children)) => children.push(index),
+                None => groups.push((group.clone(), vec![index])),
+            },
+            None => builder.add_to_scene(index),
+        }
+    }
+    for (name, children) in groups {
+        let index = builder.add_node(json!({"name": name, "children": children}));
         builder.add_to_scene(index);
     }
     builder.finish()
@@ -439,30 +456,49 @@ fn parse_glb(bytes: &[u8], path: &Path) -> Result<gltf::Gltf, GltfError> {
     })
 }
 
-/// Every triangle primitive reachable from the default scene: node name, world transform,
-/// primitive.
-fn scene_primitives(gltf: &gltf::Gltf) -> Vec<(String, Matrix4<f32>, gltf::Primitive<'_>)> {
+/// A triangle primitive reachable from the default scene.
+struct ScenePrimitive<'a> {
+    /// The node's name (`node_N` when unnamed).
+    name: String,
+    /// The node's parent's name, if it has a parent.
+    group: Option<String>,
+    world: Matrix4<f32>,
+    primitive: gltf::Primitive<'a>,
+}
+
+fn node_name(node: &gltf::Node) -> String {
+    node.name()
+        .or(node.mesh().and_then(|m| m.name()))
+        .map(str::to_owned)
+        .unwrap_or_else(|| format!("node_{}", node.index()))
+}
+
+/// Every triangle primitive reachable from the default scene.
+fn scene_primitives(gltf: &gltf::Gltf) -> Vec<ScenePrimitive<'_>> {
     let mut out = Vec::new();
     let Some(scene) = gltf.default_scene().or_else(|| gltf.scenes().next()) else {
         return out;
     };
-    let mut stack: Vec<(gltf::Node, Matrix4<f32>)> =
-        scene.nodes().map(|n| (n, Matrix4::identity())).collect();
-    while let Some((node, parent)) = stack.pop() {
+    let mut stack: Vec<(gltf::Node, Matrix4<f32>, Option<String>)> = scene
+        .nodes()
+        .map(|n| (n, Matrix4::identity(), None))
+        .collect();
+    while let Some((node, parent, group)) = stack.pop() {
         let local = Matrix4::from_column_slice(&node.transform().matrix().concat());
         let world = parent * local;
         for child in node.children() {
-            stack.push((child, world));
+            stack.push((child, world, Some(node_name(&node))));
         }
         let Some(mesh) = node.mesh() else { continue };
-        let name = node
-            .name()
-            .or(mesh.name())
-            .map(str::to_owned)
-            .unwrap_or_else(|| format!("node_{}", node.index()));
+        let name = node_name(&node);
         for primitive in mesh.primitives() {
             if primitive.mode() == gltf::mesh::Mode::Triangles {
-                out.push((name.clone(), world, primitive));
+                out.push(ScenePrimitive {
+                    name: name.clone(),
+                    group: group.clone(),
+                    world,
+                    primitive,
+                });
             }
         }
     }
@@ -540,11 +576,21 @@ pub fn read_glb_meshes(bytes: &[u8], path: &Path) -> Result<Vec<NamedMesh>, Gltf
     let gltf = parse_glb(bytes, path)?;
     let blob = gltf.blob.as_deref();
     let mut out: Vec<NamedMesh> = Vec::new();
-    for (name, world, primitive) in scene_primitives(&gltf) {
+    for ScenePrimitive {
+        name,
+        group,
+        world,
+        primitive,
+    } in scene_primitives(&gltf)
+    {
         let part = primitive_mesh(&primitive, &world, blob, &name, path)?;
         match out.last_mut().filter(|m| m.name == name) {
             Some(last) => last.mesh.append(&part),
-            None => out.push(NamedMesh { name, mesh: part }),
+            None => out.push(NamedMesh {
+                name,
+                mesh: part,
+                group,
+            }),
         }
     }
     out.sort_by(|a, b| a.name.cmp(&b.name));
@@ -634,12 +680,12 @@ pub fn read_glb_parts(bytes: &[u8], path: &Path) -> Result<GlbParts, GltfError> 
     let gltf = parse_glb(bytes, path)?;
     let images = decode_images(&gltf, path)?;
     let mut parts = Vec::new();
-    for (name, world, primitive) in scene_primitives(&gltf) {
+    for scene_primitive in scene_primitives(&gltf) {
         parts.push(glb_part(
             &gltf,
-            name,
-            &world,
-            &primitive,
+            scene_primitive.name,
+            &scene_primitive.world,
+            &scene_primitive.primitive,
             images.len(),
             path,
         )?);
@@ -792,6 +838,7 @@ mod tests {
                 texture: Some(0),
                 color: [1.0; 4],
                 double_sided: true,
+                group: Some("compound_leaf_000".into()),
             },
             ExportNode {
                 name: "branch_003".into(),
@@ -799,6 +846,7 @@ mod tests {
                 texture: None,
                 color: [0.4, 0.3, 0.2, 1.0],
                 double_sided: false,
+                group: None,
             },
         ];
         let bytes = write_glb(&nodes, &[&texture], "frond test");
@@ -811,6 +859,8 @@ mod tests {
         assert_eq!(back.len(), 2);
         assert_eq!(back[0].name, "branch_003");
         assert_eq!(back[1].name, "leaf_000");
+        assert_eq!(back[0].group, None);
+        assert_eq!(back[1].group.as_deref(), Some("compound_leaf_000"));
         assert_eq!(back[1].mesh.positions, mesh.positions);
         assert_eq!(back[1].mesh.triangles, mesh.triangles);
         assert_eq!(back[1].mesh.uvs, mesh.uvs);

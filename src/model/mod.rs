@@ -8,7 +8,7 @@
 pub mod gltf;
 pub mod plant;
 
-pub use plant::{ExportReport, ModelBranch, ModelLeaf, PlantModel};
+pub use plant::{CompoundGroup, ExportReport, ModelBranch, ModelLeaf, PlantModel};
 
 use std::path::Path;
 

@@ -34,11 +34,34 @@ pub struct ModelBranch {
     pub color: [f32; 4],
 }
 
+/// A compound leaf of the model: its rachis (a branch) and its leaflets (leaves). In the glb
+/// they are the children of one node named [`CompoundGroup::node_name`].
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
+pub struct CompoundGroup {
+    pub id: u32,
+    /// The rachis's branch id.
+    pub rachis: u32,
+    /// Leaf ids.
+    pub leaflets: Vec<u32>,
+    /// The branch nodes in the group: the rachis (unless it is the end of a longer branch)
+    /// and its petiolules.
+    pub branches: Vec<u32>,
+}
+
+impl CompoundGroup {
+    /// `compound_leaf_NNN`.
+    pub fn node_name(&self) -> String {
+        format!("compound_leaf_{:03}", self.id)
+    }
+}
+
 /// A plant ready to export.
 #[derive(Clone, Debug, Default)]
 pub struct PlantModel {
     pub leaves: Vec<ModelLeaf>,
     pub branches: Vec<ModelBranch>,
+    /// Compound leaves: which leaves are leaflets of which rachis.
+    pub compound_leaves: Vec<CompoundGroup>,
     /// The plant's up direction in the world frame, when known (written to the glb's
     /// `asset.extras.frond_up`).
     pub up: Option<[f64; 3]>,
@@ -137,6 +160,22 @@ fn io_error(path: &Path, e: impl std::fmt::Display) -> std::io::Error {
 }
 
 impl PlantModel {
+    /// The glb group node of a leaf that is a leaflet.
+    fn compound_leaf_of_leaf(&self, leaf: u32) -> Option<String> {
+        self.compound_leaves
+            .iter()
+            .find(|c| c.leaflets.contains(&leaf))
+            .map(CompoundGroup::node_name)
+    }
+
+    /// The glb group node of a branch that is a rachis or a petiolule.
+    fn compound_leaf_of_rachis(&self, branch: u32) -> Option<String> {
+        self.compound_leaves
+            .iter()
+            .find(|c| c.branches.contains(&branch))
+            .map(CompoundGroup::node_name)
+    }
+
     /// The glb of the model (the evaluation contract).
     pub fn to_glb(&self) -> Vec<u8> {
         let atlas = Atlas::pack(&self.leaves);
@@ -154,6 +193,7 @@ impl PlantModel {
                 texture: Some(atlas.placements[i].0),
                 color: [1.0; 4],
                 double_sided: true,
+                group: self.compound_leaf_of_leaf(leaf.id),
             })
             .collect();
         for branch in &self.branches {
@@ -163,6 +203,7 @@ impl PlantModel {
                 texture: None,
                 color: branch.color,
                 double_sided: false,
+                group: self.compound_leaf_of_rachis(branch.id),
             });
         }
         let pages: Vec<&RgbaImage> = atlas.pages.iter().collect();
@@ -211,8 +252,17 @@ impl PlantModel {
             "# frond plant model (world frame of the input reconstruction)\nmtllib plant.mtl\n",
         );
         let mut offset = 1usize;
-        let mut write_mesh = |obj: &mut String, name: &str, material: &str, mesh: &TriMesh| {
-            let _ = writeln!(obj, "o {name}\nusemtl {material}");
+        // A leaflet or rachis is also in its compound leaf's group (`g compound_leaf_NNN`).
+        let mut write_mesh = |obj: &mut String,
+                              name: &str,
+                              group: Option<String>,
+                              material: &str,
+                              mesh: &TriMesh| {
+            let _ = writeln!(obj, "o {name}");
+            if let Some(group) = group {
+                let _ = writeln!(obj, "g {group}");
+            }
+            let _ = writeln!(obj, "usemtl {material}");
             for p in &mesh.positions {
                 let _ = writeln!(obj, "v {} {} {}", p.x, p.y, p.z);
             }
@@ -234,6 +284,7 @@ impl PlantModel {
             write_mesh(
                 &mut obj,
                 &format!("leaf_{:03}", leaf.id),
+                self.compound_leaf_of_leaf(leaf.id),
                 &format!("leaf_atlas_{}", atlas.placements[i].0),
                 &mesh,
             );
@@ -242,6 +293,7 @@ impl PlantModel {
             write_mesh(
                 &mut obj,
                 &format!("branch_{:03}", branch.id),
+                self.compound_leaf_of_rachis(branch.id),
                 "branch",
                 &branch.mesh,
             );

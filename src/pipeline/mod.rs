@@ -22,6 +22,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::branch::BranchTree;
 use crate::branch::attach::{Attachment, PosedKind, attach_leaves};
+use crate::branch::compound::{
+    CompoundLeaf, LeafOnBranch, compound_leaves as find_compound_leaves,
+};
 use crate::branch::plant::{
     BranchSupport, PlantSkeletonOptions, automatic_plant_skeleton, model_branches,
     plant_branch_support,
@@ -31,7 +34,7 @@ use crate::leaf::{
     Boundaries, LeafError, LeafInput, LeafOptions, LeafReconstruction, LeafTimings, PlantContext,
     SkippedLeaf, UnusableView, reconstruct_leaves,
 };
-use crate::model::{ModelLeaf, PlantModel};
+use crate::model::{CompoundGroup, ModelLeaf, PlantModel};
 use crate::scene::{Scene, SceneError};
 use crate::segment::boundary::BoundaryOptions;
 use crate::segment::{
@@ -405,6 +408,8 @@ pub fn fit_leaves(
 pub struct AssembledPlant {
     pub model: PlantModel,
     pub attachment: Attachment,
+    /// Leaflets on their rachis (see [`crate::branch::compound`]).
+    pub compound_leaves: Vec<CompoundLeaf>,
     /// Seconds spent attaching the leaves.
     pub attach_seconds: f64,
 }
@@ -429,6 +434,7 @@ pub fn assemble_plant(state: &PlantState, leaves: &LeafReconstruction) -> Assemb
         .collect();
     let up = state.segmentation.foreground.up;
     let attachment = attach_leaves(branches, leaves, &small_segments, &up);
+    let compound_leaves = find_compound_leaves(branches, &attachment.on_branches);
     let attach_seconds = clock.elapsed().as_secs_f64();
     // Tip leaves are numbered after every segment id.
     let tip_leaf_base = state.labels.segments.len() as u32;
@@ -467,11 +473,25 @@ pub fn assemble_plant(state: &PlantState, leaves: &LeafReconstruction) -> Assemb
             }))
             .collect(),
         branches: branches_out,
+        compound_leaves: compound_leaves
+            .iter()
+            .map(|c| CompoundGroup {
+                id: c.id,
+                rachis: c.rachis,
+                leaflets: c.leaflets.clone(),
+                branches: (c.rachis_from == 0.0)
+                    .then_some(c.rachis)
+                    .into_iter()
+                    .chain(c.petiolules.iter().copied())
+                    .collect(),
+            })
+            .collect(),
         up: Some(up.into()),
     };
     AssembledPlant {
         model,
         attachment,
+        compound_leaves,
         attach_seconds,
     }
 }
@@ -534,6 +554,10 @@ pub struct AttachmentRecord {
     pub average: Option<crate::branch::attach::AverageLeaf>,
     /// Leaves whose base already touches a branch.
     pub touching: usize,
+    /// Every fitted leaf: the branch it is attached to (directly or by its petiole), where
+    /// along it, and the leaf's base and tip.
+    #[serde(default)]
+    pub leaves: Vec<LeafOnBranch>,
 }
 
 impl AttachmentRecord {
@@ -563,6 +587,7 @@ impl AttachmentRecord {
                 .collect(),
             average: attachment.average,
             touching: attachment.touching,
+            leaves: attachment.on_branches.clone(),
         }
     }
 }
@@ -635,6 +660,9 @@ pub struct ReconstructionReport {
     #[serde(default)]
     pub skeleton_support: SupportSummary,
     pub attachment: AttachmentRecord,
+    /// Compound leaves: a rachis (branch id) and its leaflets (segment ids).
+    #[serde(default)]
+    pub compound_leaves: Vec<CompoundLeaf>,
     pub template: Option<TemplateRecord>,
     pub skipped: Vec<SkippedLeaf>,
     pub unusable_views: Vec<UnusableView>,
@@ -682,6 +710,7 @@ pub fn write_plant(
     let AssembledPlant {
         model,
         attachment,
+        compound_leaves,
         attach_seconds,
     } = assemble_plant(state, leaves);
     let clock = Instant::now();
@@ -747,6 +776,7 @@ pub fn write_plant(
         skeleton_error: state.skeleton.error.clone(),
         skeleton_support: SupportSummary::new(&support),
         attachment: AttachmentRecord::of(&attachment),
+        compound_leaves,
         template: leaves.template_source.and_then(|t| {
             Some(TemplateRecord {
                 segment: t.segment,

@@ -38,6 +38,27 @@ pub fn plant_model(plant: &SynthPlant, texture_size: u32) -> PlantModel {
             })
             .collect(),
         branches: crate::branch::plant::model_branches(&plant.branches),
+        compound_leaves: compound_groups(plant),
         up: Some([0.0, 0.0, 1.0]),
     }
+}
+
+/// The true compound leaves, numbered in rachis order.
+fn compound_groups(plant: &SynthPlant) -> Vec<crate::model::CompoundGroup> {
+    let mut groups: Vec<crate::model::CompoundGroup> = Vec::new();
+    for leaf in &plant.leaves {
+        let Some(rachis) = leaf.compound_leaf else {
+            continue;
+        };
+        match groups.iter_mut().find(|g| g.rachis == rachis) {
+            Some(group) => group.leaflets.push(leaf.id),
+            None => groups.push(crate::model::CompoundGroup {
+                id: groups.len() as u32,
+                rachis,
+                leaflets: vec![leaf.id],
+                branches: vec![rachis],
+            }),
+        }
+    }
+    groups
 }
