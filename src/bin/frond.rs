@@ -49,7 +49,8 @@ enum Command {
     },
     /// Render a synthetic plant and write the COLMAP project a user would have, with ground truth.
     Synth {
-        /// broadleaf (8–20 large leaves), medium (60–120), smallleaf (hundreds).
+        /// broadleaf (8–20 large leaves), medium (60–120), smallleaf (hundreds), compound
+        /// (3–12 pinnately compound leaves of 7–41 leaflets).
         #[arg(long, default_value = "broadleaf")]
         preset: Preset,
         #[arg(long, default_value_t = 1)]
@@ -813,6 +814,11 @@ struct SegmentArgs {
     /// Nearest neighbours per point K.
     #[arg(long, default_value_t = 3)]
     knn: usize,
+    /// Region merging: join two segments whose union is one smooth sheet when at least this
+    /// many kNN pairs × √(smaller segment's points) connect them (0 joins every touching pair
+    /// that forms a sheet; a large value turns merging off).
+    #[arg(long, default_value_t = frond::graph::ncut::NcutOptions::default().min_merge_contact)]
+    merge_contact: f64,
 }
 
 impl SegmentArgs {
@@ -826,10 +832,17 @@ impl SegmentArgs {
         if self.knn == 0 {
             bail!("--knn must be at least 1");
         }
+        if self.merge_contact < 0.0 || self.merge_contact.is_nan() {
+            bail!(
+                "--merge-contact must be zero or positive, got {}",
+                self.merge_contact
+            );
+        }
         let mut options = SegmentOptions::default();
         options.graph.alpha = self.alpha;
         options.graph.k = self.k;
         options.graph.knn = self.knn;
+        options.ncut.min_merge_contact = self.merge_contact;
         Ok(options)
     }
 }
