@@ -32,6 +32,8 @@ pub const MIN_LEAFLETS: usize = 5;
 const PAIR_DISTANCE_PER_LEAFLET_LENGTH: f64 = 0.1;
 /// Smallest share of the leaflets on the rachis's less populated side.
 const MIN_SIDE_SHARE: f64 = 0.25;
+/// A child branch starting past this fraction of its parent continues the parent.
+const CONTINUATION_FRACTION: f64 = 0.9;
 /// Longest petiolule subtree, in median leaf lengths.
 const SPUR_LEAF_LENGTHS: f64 = 2.0;
 /// Largest mean out-of-plane sine ([`Arrangement::out_of_plane`]) of a rachis's leaflets: on
@@ -161,14 +163,22 @@ pub fn arrangement(
 
 /// The compound leaves among `leaves` on `tree` (see the module docs).
 pub fn compound_leaves(tree: &BranchTree, leaves: &[LeafOnBranch]) -> Vec<CompoundLeaf> {
-    let lengths = leaves
-        .iter()
-        .map(|l| (Point3::from(l.tip_world) - Point3::from(l.base_world)).norm());
-    let Some(leaf_length) = median(lengths) else {
+    let length_of =
+        |l: &LeafOnBranch| (Point3::from(l.tip_world) - Point3::from(l.base_world)).norm();
+    let Some(plant_leaf_length) = median(leaves.iter().map(length_of)) else {
         return Vec::new();
     };
     let mut out = Vec::new();
     for branch in &tree.branches {
+        // The scale of petiolules: the leaves on this branch (leaflets vary in size from one
+        // compound leaf to the next), else the plant's.
+        let leaf_length = median(
+            leaves
+                .iter()
+                .filter(|l| l.branch == branch.id)
+                .map(length_of),
+        )
+        .unwrap_or(plant_leaf_length);
         // A child whose subtree is short (at most two leaf lengths) and carries fewer than
         // MIN_LEAFLETS leaves is a petiolule (or a leaflet midrib the skeleton took for a
         // branch): part of the compound leaf, its leaves leaflets where it meets the rachis.
@@ -188,7 +198,9 @@ pub fn compound_leaves(tree: &BranchTree, leaves: &[LeafOnBranch]) -> Vec<Compou
                 .count();
             if length <= SPUR_LEAF_LENGTHS * leaf_length && carried < MIN_LEAFLETS {
                 spurs.push((child.parent_fraction, subtree));
-            } else {
+            } else if child.parent_fraction < CONTINUATION_FRACTION {
+                // (A child from the branch's very end continues it: it leaves the branch's
+                // leaves on one side.)
                 from = from.max(child.parent_fraction);
             }
         }

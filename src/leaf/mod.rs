@@ -116,8 +116,6 @@ pub struct LeafReconstruction {
 pub enum LeafError {
     #[error(transparent)]
     Boundary(#[from] BoundaryError),
-    #[error("no leaf segment is suitable as the generic leaf (none with an image boundary)")]
-    NoTemplate,
     #[error("leaf reconstruction cancelled")]
     Cancelled,
     #[error("the generic leaf (segment {segment}{}): {message}", view.map(|v| format!(", view {v}")).unwrap_or_default())]
@@ -536,15 +534,16 @@ pub fn choose_boundaries(
     })
 }
 
-/// Chooses the generic leaf (seed 004 §6.1: a sample leaf): among the largest leaf segments
-/// with a boundary, the one seen most frontally in its chosen view, with the most points,
-/// the largest image region and the most solid boundary most consistent across views;
-/// segments over twice the median leaf segment's size are passed over while others remain.
-pub fn choose_template(
+/// The candidates for the generic leaf (seed 004 §6.1: a sample leaf), best first: among the
+/// largest leaf segments with a boundary, the one seen most frontally in its chosen view,
+/// with the most points, the largest image region and the most solid boundary most
+/// consistent across views; segments over twice the median leaf segment's size are passed
+/// over while others remain.
+pub fn template_candidates(
     input: &LeafInput,
     plant: &PlantContext,
     boundaries: &HashMap<u32, BoundaryChoice>,
-) -> Result<TemplateSource, LeafError> {
+) -> Vec<TemplateSource> {
     let sizes_by_segment = input.labels.sizes();
     let size_of = |segment: u32| sizes_by_segment.get(segment as usize).copied().unwrap_or(0);
     let mut sizes: Vec<(usize, u32)> = boundaries
@@ -576,7 +575,7 @@ pub fn choose_template(
         }
     }
     let images = input.scene.reconstruction.images();
-    let mut best: Option<(f64, TemplateSource)> = None;
+    let mut scored: Vec<(f64, TemplateSource)> = Vec::new();
     for &(count, segment) in sizes.iter().take(TEMPLATE_CANDIDATES) {
         let choice = boundaries[&segment];
         let Ok((frame, _)) = leaf_frame(&segment_points(input, segment), plant) else {
@@ -590,17 +589,16 @@ pub fn choose_template(
             * choice.solidity.powi(2)
             * choice.area_px.sqrt()
             * (count as f64).sqrt();
-        if best.is_none_or(|(s, _)| score > s) {
-            best = Some((
-                score,
-                TemplateSource {
-                    segment,
-                    view: choice.view,
-                },
-            ));
-        }
+        scored.push((
+            score,
+            TemplateSource {
+                segment,
+                view: choice.view,
+            },
+        ));
     }
-    best.map(|(_, source)| source).ok_or(LeafError::NoTemplate)
+    scored.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.segment.cmp(&b.1.segment)));
+    scored.into_iter().map(|(_, source)| source).collect()
 }
 
 /// Checks that a user's generic-leaf pick names a non-empty segment and an existing view.
@@ -681,7 +679,7 @@ pub fn reconstruct_leaves(
 
     progress.stage("generic leaf", 0);
     let clock = Instant::now();
-    let source = match options.template {
+    let picked = match options.template {
         Some(TemplatePick {
             segment,
             view: Some(view),
@@ -702,10 +700,27 @@ pub fn reconstruct_leaves(
                 });
             }
         },
-        None => choose_template(input, plant, &boundaries.chosen).ok(),
+        None => None,
     };
-    let template = match source {
-        Some(source) => extract_template(input, &mut computed, source, plant, 256)?,
+    // The user's pick must work; automatic candidates are tried best first, and one the
+    // photos cannot give (seen too obliquely, too small) is passed over.
+    let chosen = match picked {
+        Some(source) => Some((
+            source,
+            extract_template(input, &mut computed, source, plant, 256)?,
+        )),
+        None => template_candidates(input, plant, &boundaries.chosen)
+            .into_iter()
+            .find_map(|candidate| {
+                extract_template(input, &mut computed, candidate, plant, 256)
+                    .inspect_err(|e| tracing::info!("generic leaf candidate passed over: {e}"))
+                    .ok()
+                    .map(|template| (candidate, template))
+            }),
+    };
+    let source = chosen.as_ref().map(|(source, _)| *source);
+    let template = match chosen {
+        Some((_, template)) => template,
         None => {
             // No image boundary anywhere: an elliptic generic leaf.
             let ellipse: Vec<Point2<f64>> = (0..64)

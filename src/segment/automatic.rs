@@ -168,7 +168,9 @@ fn gradient_images(scene: &Scene, progress: &dyn Progress) -> Vec<Option<Gradien
 }
 
 /// Attaches segments smaller than the minimum to the neighbouring segment they share the most
-/// kNN edges with (edges within the 3D threshold); the rest stay unassigned.
+/// kNN edges with (edges within the 3D threshold). Fragments that touch no segment but each
+/// other (a small leaf the threshold partition cut into pieces) are joined, and kept as a
+/// segment when together they reach the minimum; the rest stay unassigned.
 fn absorb_fragments(
     groups: Vec<Vec<u32>>,
     graph: &PointGraph,
@@ -220,6 +222,37 @@ fn absorb_fragments(
             }
         }
         pending = still;
+    }
+    // Join the remaining fragments that touch: connected components of the fragment graph.
+    let mut fragment_of = vec![usize::MAX; n];
+    for (f, fragment) in pending.iter().enumerate() {
+        for &node in fragment {
+            fragment_of[node as usize] = f;
+        }
+    }
+    let mut union = crate::util::union_find::UnionFind::new(pending.len());
+    for (f, fragment) in pending.iter().enumerate() {
+        for &node in fragment {
+            for (j, _) in spatial.row(node as usize) {
+                let g = fragment_of[j];
+                if g != usize::MAX && g != f {
+                    union.union(f, g);
+                }
+            }
+        }
+    }
+    let mut joined: BTreeMap<usize, Vec<u32>> = BTreeMap::new();
+    for (f, fragment) in pending.into_iter().enumerate() {
+        joined.entry(union.find(f)).or_default().extend(fragment);
+    }
+    for (_, group) in joined {
+        if group.len() >= min_points {
+            let s = groups.len() as u32;
+            for &node in &group {
+                owner[node as usize] = Some(s);
+            }
+            groups.push(group);
+        }
     }
     (groups, owner)
 }
