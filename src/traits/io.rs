@@ -35,8 +35,8 @@ fn output(path: &Path, message: impl std::fmt::Display) -> TraitsError {
 }
 
 /// The organs of a `frond reconstruct` output folder: leaf meshes from `plant.glb`, the branch
-/// tree from `skeleton.json`, the up direction from `segments.json`, leaf bases and petiole
-/// attachments from `report.json`.
+/// tree from `skeleton.json`, the up direction from `segments.json`, leaf bases and the
+/// branch each leaf is attached to from `report.json`.
 pub fn read_reconstruction(out: &Path, plant: &str) -> Result<PlantOrgans, TraitsError> {
     let segments_path = out.join(crate::pipeline::files::SEGMENTS_FILE);
     let segments = SegmentsFile::read(&segments_path).map_err(|e| input(&segments_path, e))?;
@@ -61,12 +61,21 @@ pub fn read_reconstruction(out: &Path, plant: &str) -> Result<PlantOrgans, Trait
         };
         let fitted = report.leaves.iter().find(|l| l.segment == id);
         let mut base_world = fitted.map(|l| Point3::from(l.base));
+        // Every fitted leaf's branch (reports before it was recorded: petioles only).
         let mut branch = report
             .attachment
-            .petioles
+            .leaves
             .iter()
-            .find(|p| p.leaf == id)
-            .map(|p| (p.branch, p.parent_fraction));
+            .find(|l| l.leaf == id)
+            .map(|l| (l.branch, l.parent_fraction))
+            .or_else(|| {
+                report
+                    .attachment
+                    .petioles
+                    .iter()
+                    .find(|p| p.leaf == id)
+                    .map(|p| (p.branch, p.parent_fraction))
+            });
         if fitted.is_none() {
             // A posed leaf: the posed record whose base is nearest the mesh.
             let nearest = report.attachment.posed.iter().min_by(|a, b| {
