@@ -33,18 +33,7 @@ fn dataset() -> &'static Path {
 /// `frond reconstruct` of the shared dataset, once.
 fn reconstruction() -> &'static Path {
     static DIR: OnceLock<TempDir> = OnceLock::new();
-    DIR.get_or_init(|| {
-        let out = tempfile::tempdir().unwrap();
-        cargo_bin_cmd!("frond")
-            .arg("reconstruct")
-            .arg(dataset())
-            .arg("--out")
-            .arg(out.path())
-            .assert()
-            .success();
-        out
-    })
-    .path()
+    common::reconstruction(&DIR, dataset())
 }
 
 /// `frond reconstruct INPUT --out OUT`, which must succeed; its report.

@@ -24,6 +24,23 @@ pub fn synth_dataset(
         .1
 }
 
+/// `frond reconstruct INPUT --out <tempdir>` once per test binary into `cell`; the output
+/// folder.
+pub fn reconstruction(cell: &'static OnceLock<TempDir>, input: &Path) -> &'static Path {
+    cell.get_or_init(|| {
+        let out = tempfile::tempdir().unwrap();
+        assert_cmd::cargo::cargo_bin_cmd!("frond")
+            .arg("reconstruct")
+            .arg(input)
+            .arg("--out")
+            .arg(out.path())
+            .assert()
+            .success();
+        out
+    })
+    .path()
+}
+
 /// `../shared/data/<relative>` (real third-party data beside the checkout).
 pub fn shared_data(relative: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
