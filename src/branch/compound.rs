@@ -2,10 +2,11 @@
 //! frond) is reconstructed as its parts: each leaflet is a leaf, the rachis a branch the
 //! leaflets hang on. This module says which branches are rachises and which leaves are their
 //! leaflets, from how the leaves sit on each branch:
-//! - a rachis is a branch, or the end of a branch past its last child branch, that carries
-//!   at least [`MIN_LEAFLETS`] leaves; child branches (with their own children) no longer
-//!   than two median leaves that carry fewer than [`MIN_LEAFLETS`] leaves are its petiolules,
-//!   and their leaves its leaflets;
+//! - a rachis is a branch, or the end of a branch past its last child branch (a child from
+//!   the branch's last tenth continues it instead), that carries at least [`MIN_LEAFLETS`]
+//!   leaves; child branches whose subtree is no longer than two median lengths of the leaves
+//!   on the branch and carries fewer than [`MIN_LEAFLETS`] leaves are its petiolules, and
+//!   their leaves its leaflets;
 //! - its leaflets spread in *one plane through the rachis* (leaves spiralled around a twig or
 //!   a stem do not), on *both sides* of it (at least a quarter on the less populated side).
 //!
