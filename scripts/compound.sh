@@ -19,18 +19,27 @@ cargo build --release --quiet --bin frond
 frond="$PWD/target/release/frond"
 out=target/compound
 mkdir -p "$out"
+# Runs a step quietly into LOG; on failure shows the log's end.
+quiet() {
+  local log="$1"
+  shift
+  "$@" >>"$log" 2>&1 || {
+    tail -20 "$log"
+    exit 1
+  }
+}
 for seed in "${seeds[@]}"; do
   if [ "$photos" = 1 ]; then
     data="$out/photos_$seed"
-    [ -d "$data" ] || "$frond" synth --preset compound --seed "$seed" --no-points --out "$data" >/dev/null
+    [ -d "$data" ] || quiet "$data.log" "$frond" synth --preset compound --seed "$seed" --no-points --out "$data"
     rm -rf "$data.out"
-    "$frond" reconstruct "$data/images" --out "$data.out" >/dev/null
+    quiet "$data.log" "$frond" reconstruct "$data/images" --out "$data.out"
     scores=$("$frond" eval --gt "$data" --pred "$data.out" --pred-model "$data.out/dense/sparse")
   else
     data="$out/points_$seed"
-    [ -d "$data" ] || "$frond" synth --preset compound --seed "$seed" --out "$data" >/dev/null
+    [ -d "$data" ] || quiet "$data.log" "$frond" synth --preset compound --seed "$seed" --out "$data"
     rm -rf "$data.out"
-    "$frond" reconstruct "$data" --out "$data.out" >/dev/null
+    quiet "$data.log" "$frond" reconstruct "$data" --out "$data.out"
     scores=$("$frond" eval --gt "$data" --pred "$data.out")
   fi
   echo "seed $seed"
