@@ -722,7 +722,8 @@ pub fn reconstruct_leaves(
     let template = match chosen {
         Some((_, template)) => template,
         None => {
-            // No image boundary anywhere: an elliptic generic leaf.
+            // No candidate has an image boundary the photos can give: an elliptic generic
+            // leaf.
             let ellipse: Vec<Point2<f64>> = (0..64)
                 .map(|k| {
                     let t = std::f64::consts::TAU * k as f64 / 64.0;
