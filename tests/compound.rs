@@ -114,6 +114,39 @@ fn leaflets_are_grouped_on_their_rachis_in_every_output() {
 }
 
 #[test]
+fn the_traits_name_each_leaflets_compound_leaf() {
+    let out = reconstruction();
+    let report = read_json(&out.join("report.json"));
+    let compound = report["compound_leaves"].as_array().unwrap();
+    let expected: BTreeMap<String, u64> = compound
+        .iter()
+        .flat_map(|c| {
+            let id = c["id"].as_u64().unwrap();
+            c["leaflets"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(move |l| (format!("leaf_{:03}", l.as_u64().unwrap()), id))
+        })
+        .collect();
+    let table = std::fs::read_to_string(out.join("traits.csv")).unwrap();
+    let mut found: BTreeMap<String, u64> = BTreeMap::new();
+    let mut count = None;
+    for line in table.lines().skip(1) {
+        let fields: Vec<&str> = line.split(',').collect();
+        match (fields[1], fields[3]) {
+            (organ, "compound_leaf") => {
+                found.insert(organ.to_owned(), fields[4].parse::<f64>().unwrap() as u64);
+            }
+            ("plant", "compound_leaf_count") => count = Some(fields[4].parse::<f64>().unwrap()),
+            _ => {}
+        }
+    }
+    assert_eq!(found, expected);
+    assert_eq!(count, Some(compound.len() as f64));
+}
+
+#[test]
 fn eval_scores_the_leaflets_on_their_rachis() {
     let output = cargo_bin_cmd!("frond")
         .arg("eval")

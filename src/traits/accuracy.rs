@@ -302,6 +302,7 @@ mod tests {
                 base_world: Some(Point3::new(0.0, 0.0, 0.3)),
                 branch: None,
                 synthesized: false,
+                compound_leaf: None,
             }],
             branches: vec![SkeletonRecord {
                 id: 3,

@@ -87,12 +87,18 @@ pub fn read_reconstruction(out: &Path, plant: &str) -> Result<PlantOrgans, Trait
                 branch = Some((posed.branch, 1.0));
             }
         }
+        let compound_leaf = report
+            .compound_leaves
+            .iter()
+            .find(|c| c.leaflets.contains(&id))
+            .map(|c| c.id);
         leaves.push(LeafOrgan {
             id,
             mesh: node.mesh,
             base_world,
             branch,
             synthesized: fitted.is_none(),
+            compound_leaf,
         });
     }
     Ok(PlantOrgans {
@@ -117,6 +123,8 @@ struct GtLeaf {
     base: [f64; 3],
     #[serde(default)]
     branch: Option<u32>,
+    #[serde(default)]
+    compound_leaf: Option<u32>,
 }
 
 /// The organs of a synthetic dataset's ground truth (`gt/leaves.json` and its meshes,
@@ -137,6 +145,7 @@ pub fn read_ground_truth(dataset: &Path, plant: &str) -> Result<PlantOrgans, Tra
             base_world: Some(Point3::from(record.base)),
             branch: record.branch.map(|b| (b, 1.0)),
             synthesized: false,
+            compound_leaf: record.compound_leaf,
         });
     }
     let branches_path = gt.join("branches.json");

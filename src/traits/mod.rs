@@ -48,6 +48,9 @@ pub struct LeafOrgan {
     /// A leaf the reconstruction synthesized (the average leaf posed on a segment too small
     /// to fit, or at a branch tip) rather than fitted to its own points.
     pub synthesized: bool,
+    /// For a leaflet: its compound leaf (the report's compound-leaf id; in the truth, the
+    /// rachis's branch id).
+    pub compound_leaf: Option<u32>,
 }
 
 /// What traits are measured from.
@@ -599,6 +602,9 @@ pub fn plant_traits(organs: &PlantOrgans, scale: Option<&Scale>) -> TraitTable {
         if let Some((branch, _)) = leaf.branch {
             push(&id, "leaf", "branch", Kind::Id, branch as f64);
         }
+        if let Some(compound) = leaf.compound_leaf {
+            push(&id, "leaf", "compound_leaf", Kind::Id, compound as f64);
+        }
         push(
             &id,
             "leaf",
@@ -727,6 +733,19 @@ pub fn plant_traits(organs: &PlantOrgans, scale: Option<&Scale>) -> TraitTable {
         "fitted_leaf_count",
         Kind::Count,
         fitted as f64,
+    );
+    let compound_leaves: std::collections::BTreeSet<u32> = organs
+        .leaves
+        .iter()
+        .filter(|l| leaf_traits_by_id.contains_key(&l.id))
+        .filter_map(|l| l.compound_leaf)
+        .collect();
+    push(
+        "plant",
+        "plant",
+        "compound_leaf_count",
+        Kind::Count,
+        compound_leaves.len() as f64,
     );
     push(
         "plant",
@@ -974,6 +993,7 @@ mod tests {
                 base_world: None,
                 branch: Some((0, 0.8)),
                 synthesized: false,
+                compound_leaf: Some(2),
             }],
             branches: vec![record(0, None, 0.0, &[[0.0, 0.0, 0.0], [0.0, 0.0, 0.3]])],
         };
@@ -1000,6 +1020,8 @@ mod tests {
         assert!((model.value("plant", "height").unwrap() - 0.3).abs() < 1e-6);
         assert_eq!(model.value("plant", "leaf_count"), Some(1.0));
         assert_eq!(model.value("leaf_004", "branch"), Some(0.0));
+        assert_eq!(model.value("leaf_004", "compound_leaf"), Some(2.0));
+        assert_eq!(model.value("plant", "compound_leaf_count"), Some(1.0));
         // Seen from above the flat leaf covers its own area (grid cells 1/100 of its length).
         let projected = model.value("plant", "projected_leaf_area").unwrap();
         assert!((projected - 0.01).abs() < 0.0005, "{projected}");
