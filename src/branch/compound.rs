@@ -53,6 +53,13 @@ pub struct LeafOnBranch {
     pub tip_world: [f64; 3],
 }
 
+impl LeafOnBranch {
+    /// Base-to-tip distance.
+    pub fn length(&self) -> f64 {
+        (Point3::from(self.tip_world) - Point3::from(self.base_world)).norm()
+    }
+}
+
 /// How the leaves on one branch are arranged.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Arrangement {
@@ -88,11 +95,7 @@ pub struct CompoundLeaf {
 
 /// The arrangement of `leaves` (all on `branch`) on it; `None` for fewer than two leaves or a
 /// branch the tree does not hold.
-pub fn arrangement(
-    tree: &BranchTree,
-    branch: u32,
-    leaves: &[&LeafOnBranch],
-) -> Option<Arrangement> {
+pub fn arrangement(tree: &BranchTree, branch: u32, leaves: &[LeafOnBranch]) -> Option<Arrangement> {
     let cylinder = &tree.get(branch)?.cylinder;
     if leaves.len() < 2 {
         return None;
@@ -131,11 +134,8 @@ pub fn arrangement(
         .iter()
         .map(|(tangent, across)| tangent.cross(&normal).dot(across).signum())
         .collect();
-    let lengths: Vec<f64> = leaves
-        .iter()
-        .map(|l| (Point3::from(l.tip_world) - Point3::from(l.base_world)).norm())
-        .collect();
-    let reach = PAIR_DISTANCE_PER_LEAFLET_LENGTH * median(lengths.iter().copied()).unwrap_or(0.0);
+    let reach = PAIR_DISTANCE_PER_LEAFLET_LENGTH
+        * median(leaves.iter().map(LeafOnBranch::length)).unwrap_or(0.0);
     let tip_most = leaves
         .iter()
         .enumerate()
@@ -164,9 +164,7 @@ pub fn arrangement(
 
 /// The compound leaves among `leaves` on `tree` (see the module docs).
 pub fn compound_leaves(tree: &BranchTree, leaves: &[LeafOnBranch]) -> Vec<CompoundLeaf> {
-    let length_of =
-        |l: &LeafOnBranch| (Point3::from(l.tip_world) - Point3::from(l.base_world)).norm();
-    let Some(plant_leaf_length) = median(leaves.iter().map(length_of)) else {
+    let Some(plant_leaf_length) = median(leaves.iter().map(LeafOnBranch::length)) else {
         return Vec::new();
     };
     let mut out = Vec::new();
@@ -177,7 +175,7 @@ pub fn compound_leaves(tree: &BranchTree, leaves: &[LeafOnBranch]) -> Vec<Compou
             leaves
                 .iter()
                 .filter(|l| l.branch == branch.id)
-                .map(length_of),
+                .map(LeafOnBranch::length),
         )
         .unwrap_or(plant_leaf_length);
         // A child whose subtree is short (at most two leaf lengths) and carries fewer than
@@ -231,8 +229,7 @@ pub fn compound_leaves(tree: &BranchTree, leaves: &[LeafOnBranch]) -> Vec<Compou
                 .total_cmp(&b.parent_fraction)
                 .then(a.leaf.cmp(&b.leaf))
         });
-        let refs: Vec<&LeafOnBranch> = on.iter().collect();
-        let Some(arrangement) = arrangement(tree, branch.id, &refs) else {
+        let Some(arrangement) = arrangement(tree, branch.id, &on) else {
             continue;
         };
         tracing::debug!(
