@@ -35,7 +35,9 @@ fn main() -> Result<()> {
         }
         match segmentation.foreground.class[i] {
             PointClass::Plant => match segmentation.point_segment[i] {
-                Some(s) => format!("{:?}", segmentation.segments[s as usize].label).to_lowercase(),
+                Some(s) => {
+                    format!("{:?}#{s}", segmentation.segments[s as usize].label).to_lowercase()
+                }
                 None => "unassigned".into(),
             },
             other => format!("{other:?}").to_lowercase(),
@@ -66,6 +68,52 @@ fn main() -> Result<()> {
             .collect();
         let mark = if matched.contains(leaf) { " " } else { "✗" };
         println!("{mark} leaf{leaf:<4} {total:>5}  {}", shown.join("  "));
+        // Why the segment holding most of a missed leaf is not a leaf segment.
+        if let Some(id) = top
+            .first()
+            .and_then(|(f, _)| f.split_once('#'))
+            .and_then(|(_, id)| id.parse::<usize>().ok())
+        {
+            let segment = &segmentation.segments[id];
+            let local: HashMap<u32, usize> = segmentation
+                .graph_points
+                .iter()
+                .enumerate()
+                .map(|(l, &g)| (g as u32, l))
+                .collect();
+            let positions: Vec<nalgebra::Point3<f64>> = segment
+                .points
+                .iter()
+                .map(|&g| segmentation.points.positions[g as usize])
+                .collect();
+            let facing = segment
+                .points
+                .iter()
+                .filter_map(|g| local.get(g))
+                .map(|&l| {
+                    segmentation.graph.normals[l]
+                        .dot(&segment.shape.normal())
+                        .abs()
+                })
+                .sum::<f64>()
+                / segment.points.len().max(1) as f64;
+            let gt_share = segment
+                .points
+                .iter()
+                .filter(|&&g| truth.points.leaf_ids[g as usize] == *leaf)
+                .count() as f64
+                / segment.points.len().max(1) as f64;
+            println!(
+                "      segment {id}: {} points ({:.0}% this leaf), width ratio {:.3}, facing {:.3}, cubic residual {:.4}",
+                segment.points.len(),
+                100.0 * gt_share,
+                segment.shape.width_ratio(),
+                facing,
+                segment
+                    .shape
+                    .cubic_sheet_residual(positions.iter().copied())
+            );
+        }
         // For leaves split between leaf segments: is the union of the two largest a sheet?
         let segments: Vec<i64> = top
             .iter()

@@ -55,12 +55,41 @@ pub fn local_shapes(points: &PointSet, k: usize) -> Vec<LocalShape> {
 /// Unit normals from the principal components of each point's `k` nearest neighbours and
 /// itself (unoriented; however few the points, unlike [`local_shapes`]).
 pub fn estimate_normals(points: &PointSet, k: usize) -> Vec<nalgebra::Vector3<f64>> {
+    local_planes(points, k)
+        .into_iter()
+        .map(|p| p.normal)
+        .collect()
+}
+
+/// The best-fit plane of a point's neighbourhood.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LocalPlane {
+    /// Unoriented unit normal.
+    pub normal: nalgebra::Vector3<f64>,
+    /// RMS distance of the neighbourhood from the plane, `√λ₃` (model units): the surface's
+    /// noise where the neighbourhood lies on one smooth surface.
+    pub rms: f64,
+}
+
+/// Best-fit planes of each point's `k` nearest neighbours and itself (a z-facing plane of zero
+/// RMS where the points cannot be indexed).
+pub fn local_planes(points: &PointSet, k: usize) -> Vec<LocalPlane> {
+    let fallback = LocalPlane {
+        normal: nalgebra::Vector3::z(),
+        rms: 0.0,
+    };
     let Ok(neighbours) = Neighbours::new(points.positions.iter().copied()) else {
-        return vec![nalgebra::Vector3::z(); points.len()];
+        return vec![fallback; points.len()];
     };
     (0..neighbours.len())
         .into_par_iter()
-        .map(|i| shape_around(&neighbours, i, k).normal())
+        .map(|i| {
+            let shape = shape_around(&neighbours, i, k);
+            LocalPlane {
+                normal: shape.normal(),
+                rms: shape.eigenvalues[2].sqrt(),
+            }
+        })
         .collect()
 }
 

@@ -86,6 +86,9 @@ pub struct PointGraph {
     pub dropped_not_covisible: usize,
     /// Unoriented unit normal per node (PCA of its 10 nearest neighbours).
     pub normals: Vec<nalgebra::Vector3<f64>>,
+    /// RMS distance of each node's 10 nearest neighbours from their plane (model units): the
+    /// local surface noise the sheet tests allow for ([`ncut::sheet_tolerance`]).
+    pub plane_rms: Vec<f64>,
 }
 
 /// Root mean square of the values below their 99th percentile (a scale robust to outliers).
@@ -142,7 +145,9 @@ impl PointGraph {
     pub fn build(points: &PointSet, views: &[ViewData<'_>], options: GraphOptions) -> Self {
         let pairs = knn_pairs(points, options.knn);
         let use_images = options.alpha > 0.0;
-        let normals = estimate_normals(points, 10);
+        let planes = local_shape::local_planes(points, 10);
+        let normals: Vec<nalgebra::Vector3<f64>> = planes.iter().map(|p| p.normal).collect();
+        let plane_rms: Vec<f64> = planes.iter().map(|p| p.rms).collect();
         let depth_maps = use_images.then(|| visibility::SplatDepthMaps::build(points, views, 2.0));
         // Per edge: (a, b, d3D, d2D, Σg², #g) over the gradient samples of all common views.
         type Measured = Option<(u32, u32, f32, f32, f64, usize)>;
@@ -244,6 +249,7 @@ impl PointGraph {
             options,
             dropped_not_covisible,
             normals,
+            plane_rms,
         };
         for e in &mut edges {
             e.weight = graph.weight(e.d3d as f64, e.d2d as f64) as f32;

@@ -30,8 +30,13 @@ pub struct NcutOptions {
     /// Bottleneck: cut edges ≤ this × √(points on the smaller side).
     pub bottleneck: f64,
     /// Sheet residual (see [`Shape::sheet_residual`]) above which a group is not one smooth
-    /// surface and so not a single leaf.
+    /// surface and so not a single leaf, before the noise allowance ([`sheet_tolerance`]).
     pub max_sheet_residual: f64,
+    /// The residual a sheet may have from the points' noise: this many times the median local
+    /// plane RMS of its points, added in quadrature to `max_sheet_residual` × its length. Small
+    /// leaves are only a few noise levels long, so a relative bound alone calls them rough.
+    #[serde(default = "default_sheet_noise_factor")]
+    pub sheet_noise_factor: f64,
     /// Region merging joins two segments whose union is a sheet when at least this many kNN
     /// pairs × √(smaller size) connect them (a shared border, not a touching corner).
     pub min_merge_contact: f64,
@@ -45,9 +50,36 @@ impl Default for NcutOptions {
             boundary_ratio: 0.3,
             bottleneck: 0.35,
             max_sheet_residual: 0.02,
+            sheet_noise_factor: default_sheet_noise_factor(),
             min_merge_contact: 0.2,
         }
     }
+}
+
+fn default_sheet_noise_factor() -> f64 {
+    SHEET_NOISE_FACTOR
+}
+
+/// See [`NcutOptions::sheet_noise_factor`].
+pub const SHEET_NOISE_FACTOR: f64 = 1.5;
+
+/// The largest sheet residual (relative to the length, as [`Shape::sheet_residual`]) of a
+/// group that is still one smooth sheet: `√(r² + (c·σ/L)²)` for the shape allowance
+/// `r = max_sheet_residual`, the noise factor `c`, the group's median local plane RMS `σ`
+/// ([`crate::graph::PointGraph::plane_rms`]) and its length `L`.
+pub fn sheet_tolerance(options: &NcutOptions, shape: &Shape, noise: f64) -> f64 {
+    let relative_noise = options.sheet_noise_factor * noise / shape.length().max(1e-12);
+    options.max_sheet_residual.hypot(relative_noise)
+}
+
+/// Median of the per-node `plane_rms` over `nodes` (0 for none).
+pub fn median_noise(plane_rms: &[f64], nodes: impl Iterator<Item = usize>) -> f64 {
+    let mut values: Vec<f64> = nodes.filter_map(|n| plane_rms.get(n).copied()).collect();
+    if values.is_empty() {
+        return 0.0;
+    }
+    let middle = values.len() / 2;
+    *values.select_nth_unstable_by(middle, f64::total_cmp).1
 }
 
 /// A candidate split of a group.
@@ -126,10 +158,12 @@ pub fn best_sweep_split(adjacency: &Adjacency, values: &[f64], min_side: usize) 
 }
 
 /// Decides whether a split separates real parts (see the module docs).
+/// `positions` and `plane_rms` are the group's nodes' (see [`sheet_tolerance`]).
 pub fn judge_split(
     adjacency: &Adjacency,
     split: &Split,
     positions: &[Point3<f64>],
+    plane_rms: &[f64],
     options: &NcutOptions,
 ) -> Option<SplitReason> {
     if split.ncut > options.max_ncut {
@@ -149,7 +183,9 @@ pub fn judge_split(
         Shape::of(points.iter().copied()).sheet_residual(points.iter().copied())
     };
     let whole = residual(&mut positions.iter().copied());
-    if whole > options.max_sheet_residual {
+    let shape = Shape::of(positions.iter().copied());
+    let tolerance = sheet_tolerance(options, &shape, median_noise(plane_rms, 0..positions.len()));
+    if whole > tolerance {
         let side = |a: bool| {
             positions
                 .iter()
@@ -176,11 +212,13 @@ pub struct NcutStats {
 }
 
 /// Splits every group recursively. `adjacency` is the whole graph (global node ids),
-/// `positions` the node positions. Returns the final groups (global ids) and statistics.
+/// `positions` the node positions and `plane_rms` their local plane RMS (see
+/// [`sheet_tolerance`]). Returns the final groups (global ids) and statistics.
 pub fn recursive_ncut(
     adjacency: &Adjacency,
     groups: Vec<Vec<u32>>,
     positions: &[Point3<f64>],
+    plane_rms: &[f64],
     options: &NcutOptions,
 ) -> (Vec<Vec<u32>>, NcutStats) {
     let mut stats = NcutStats::default();
@@ -212,7 +250,11 @@ pub fn recursive_ncut(
         };
         let local_positions: Vec<Point3<f64>> =
             group.iter().map(|&g| positions[g as usize]).collect();
-        match judge_split(&sub, &split, &local_positions, options) {
+        let local_noise: Vec<f64> = group
+            .iter()
+            .map(|&g| plane_rms.get(g as usize).copied().unwrap_or(0.0))
+            .collect();
+        match judge_split(&sub, &split, &local_positions, &local_noise, options) {
             Some(reason) => {
                 match reason {
                     SplitReason::Boundary => stats.splits_boundary += 1,
@@ -277,8 +319,13 @@ mod tests {
     fn weak_boundary_is_split_and_a_uniform_patch_is_not() {
         let (adjacency, positions) = two_patches(12, 0.05);
         let all: Vec<u32> = (0..adjacency.num_nodes() as u32).collect();
-        let (groups, stats) =
-            recursive_ncut(&adjacency, vec![all], &positions, &NcutOptions::default());
+        let (groups, stats) = recursive_ncut(
+            &adjacency,
+            vec![all],
+            &positions,
+            &[],
+            &NcutOptions::default(),
+        );
         assert_eq!(groups.len(), 2, "{stats:?}");
         assert_eq!(stats.splits_boundary, 1);
         for g in &groups {
@@ -289,8 +336,13 @@ mod tests {
         // Joined as strongly as inside: one flat patch, kept whole.
         let (adjacency, positions) = two_patches(12, 1.0);
         let all: Vec<u32> = (0..adjacency.num_nodes() as u32).collect();
-        let (groups, _) =
-            recursive_ncut(&adjacency, vec![all], &positions, &NcutOptions::default());
+        let (groups, _) = recursive_ncut(
+            &adjacency,
+            vec![all],
+            &positions,
+            &[],
+            &NcutOptions::default(),
+        );
         assert_eq!(groups.len(), 1);
     }
 
@@ -310,8 +362,13 @@ mod tests {
         }
         let bridged = Adjacency::from_edges(adjacency.num_nodes(), edges.into_iter());
         let all: Vec<u32> = (0..bridged.num_nodes() as u32).collect();
-        let (groups, stats) =
-            recursive_ncut(&bridged, vec![all], &positions, &NcutOptions::default());
+        let (groups, stats) = recursive_ncut(
+            &bridged,
+            vec![all],
+            &positions,
+            &[],
+            &NcutOptions::default(),
+        );
         assert_eq!(groups.len(), 2, "{stats:?}");
         assert_eq!(stats.splits_bottleneck, 1);
     }

@@ -14,7 +14,7 @@ use super::foreground::{
 };
 use crate::graph::components::Adjacency;
 use crate::graph::gradient::GradientImage;
-use crate::graph::ncut::{NcutOptions, NcutStats, recursive_ncut};
+use crate::graph::ncut::{NcutOptions, NcutStats, median_noise, recursive_ncut, sheet_tolerance};
 use crate::graph::points::PointSet;
 use crate::graph::shape::Shape;
 use crate::graph::{GraphOptions, PointGraph, ViewData};
@@ -285,9 +285,12 @@ fn merge_sheets(
                 *contact.entry((a.min(b), a.max(b))).or_insert(0) += 1;
             }
         }
-        let sheet = |nodes: &mut dyn Iterator<Item = u32>| {
-            let points: Vec<Point3<f64>> = nodes.map(|n| positions[n as usize]).collect();
-            Shape::of(points.iter().copied()).sheet_residual(points.iter().copied())
+        // Whether the nodes form one smooth sheet (within the noise allowance).
+        let sheet = |nodes: &[u32]| {
+            let points: Vec<Point3<f64>> = nodes.iter().map(|&n| positions[n as usize]).collect();
+            let shape = Shape::of(points.iter().copied());
+            let noise = median_noise(&graph.plane_rms, nodes.iter().map(|&n| n as usize));
+            shape.sheet_residual(points.iter().copied()) <= sheet_tolerance(options, &shape, noise)
         };
         let mut candidates: Vec<(f64, usize, usize)> = contact
             .iter()
@@ -304,8 +307,8 @@ fn merge_sheets(
             if merged[a] || merged[b] {
                 continue;
             }
-            let union = sheet(&mut groups[a].iter().chain(&groups[b]).copied());
-            if union <= options.max_sheet_residual {
+            let union: Vec<u32> = groups[a].iter().chain(&groups[b]).copied().collect();
+            if sheet(&union) {
                 let taken = std::mem::take(&mut groups[b]);
                 groups[a].extend(taken);
                 merged[a] = true;
@@ -332,6 +335,7 @@ fn classify(
     shape: &Shape,
     points: &[Point3<f64>],
     normals: &[nalgebra::Vector3<f64>],
+    noise: f64,
     foreground: &Foreground,
     plant_height: f64,
     options: &NcutOptions,
@@ -385,7 +389,8 @@ fn classify(
         .sum::<f64>()
         / normals.len().max(1) as f64;
     if facing >= MIN_LEAF_FACING
-        && shape.cubic_sheet_residual(points.iter().copied()) <= options.max_sheet_residual
+        && shape.cubic_sheet_residual(points.iter().copied())
+            <= sheet_tolerance(options, shape, noise)
     {
         return SegmentLabel::Leaf;
     }
@@ -478,6 +483,7 @@ pub fn segment_scene(
         &adjacency,
         components.groups(),
         &plant_points.positions,
+        &graph.plane_rms,
         &options.ncut,
     );
     tracing::debug!(seconds = phase.elapsed().as_secs_f64(), "normalized cuts");
@@ -533,10 +539,12 @@ pub fn segment_scene(
         let shape = Shape::of(positions.iter().copied());
         let normals: Vec<nalgebra::Vector3<f64>> =
             group.iter().map(|&i| graph.normals[i as usize]).collect();
+        let noise = median_noise(&graph.plane_rms, group.iter().map(|&i| i as usize));
         let label = classify(
             &shape,
             &positions,
             &normals,
+            noise,
             &foreground,
             plant_height,
             &options.ncut,
