@@ -43,6 +43,66 @@ fn main() -> Result<()> {
             other => format!("{other:?}").to_lowercase(),
         }
     };
+    // A segment's classification features.
+    let local: HashMap<u32, usize> = segmentation
+        .graph_points
+        .iter()
+        .enumerate()
+        .map(|(l, &g)| (g as u32, l))
+        .collect();
+    let describe = |id: usize, leaf: Option<i64>| {
+        let segment = &segmentation.segments[id];
+        let positions: Vec<nalgebra::Point3<f64>> = segment
+            .points
+            .iter()
+            .map(|&g| segmentation.points.positions[g as usize])
+            .collect();
+        let nodes: Vec<usize> = segment
+            .points
+            .iter()
+            .filter_map(|g| local.get(g).copied())
+            .collect();
+        let facing = nodes
+            .iter()
+            .map(|&l| {
+                segmentation.graph.normals[l]
+                    .dot(&segment.shape.normal())
+                    .abs()
+            })
+            .sum::<f64>()
+            / nodes.len().max(1) as f64;
+        let noise =
+            frond::graph::ncut::median_noise(&segmentation.graph.plane_rms, nodes.iter().copied());
+        let tolerance = frond::graph::ncut::sheet_tolerance(
+            &SegmentOptions::default().ncut,
+            &segment.shape,
+            noise,
+        );
+        let share = leaf.map_or(String::new(), |leaf| {
+            let n = segment
+                .points
+                .iter()
+                .filter(|&&g| truth.points.leaf_ids[g as usize] == leaf)
+                .count();
+            format!(
+                " ({:.0}% this leaf)",
+                100.0 * n as f64 / segment.points.len().max(1) as f64
+            )
+        });
+        println!(
+            "      segment {id} ({:?}): {} points{share}, length {:.1} mm, width ratio {:.3}, facing {:.3}, cubic residual {:.4} (tolerance {:.4}, noise {:.2} mm)",
+            segment.label,
+            segment.points.len(),
+            1e3 * segment.shape.length(),
+            segment.shape.width_ratio(),
+            facing,
+            segment
+                .shape
+                .cubic_sheet_residual(positions.iter().copied()),
+            tolerance,
+            1e3 * noise
+        );
+    };
     let mut by_gt: BTreeMap<i64, HashMap<String, usize>> = BTreeMap::new();
     for i in 0..predicted.len() {
         let l = truth.points.leaf_ids[i];
@@ -74,45 +134,7 @@ fn main() -> Result<()> {
             .and_then(|(f, _)| f.split_once('#'))
             .and_then(|(_, id)| id.parse::<usize>().ok())
         {
-            let segment = &segmentation.segments[id];
-            let local: HashMap<u32, usize> = segmentation
-                .graph_points
-                .iter()
-                .enumerate()
-                .map(|(l, &g)| (g as u32, l))
-                .collect();
-            let positions: Vec<nalgebra::Point3<f64>> = segment
-                .points
-                .iter()
-                .map(|&g| segmentation.points.positions[g as usize])
-                .collect();
-            let facing = segment
-                .points
-                .iter()
-                .filter_map(|g| local.get(g))
-                .map(|&l| {
-                    segmentation.graph.normals[l]
-                        .dot(&segment.shape.normal())
-                        .abs()
-                })
-                .sum::<f64>()
-                / segment.points.len().max(1) as f64;
-            let gt_share = segment
-                .points
-                .iter()
-                .filter(|&&g| truth.points.leaf_ids[g as usize] == *leaf)
-                .count() as f64
-                / segment.points.len().max(1) as f64;
-            println!(
-                "      segment {id}: {} points ({:.0}% this leaf), width ratio {:.3}, facing {:.3}, cubic residual {:.4}",
-                segment.points.len(),
-                100.0 * gt_share,
-                segment.shape.width_ratio(),
-                facing,
-                segment
-                    .shape
-                    .cubic_sheet_residual(positions.iter().copied())
-            );
+            describe(id, Some(*leaf));
         }
         // For leaves split between leaf segments: is the union of the two largest a sheet?
         let segments: Vec<i64> = top
@@ -200,6 +222,13 @@ fn main() -> Result<()> {
             .map(|(w, c)| format!("{w}:{c}"))
             .collect();
         println!("  unmatched segment {segment}: {}", shown.join("  "));
+        if let Some(id) = segmentation
+            .segments
+            .iter()
+            .position(|s| s.leaf_id == Some(segment as u32))
+        {
+            describe(id, None);
+        }
     }
     Ok(())
 }

@@ -74,12 +74,7 @@ pub fn sheet_tolerance(options: &NcutOptions, shape: &Shape, noise: f64) -> f64 
 
 /// Median of the per-node `plane_rms` over `nodes` (0 for none).
 pub fn median_noise(plane_rms: &[f64], nodes: impl Iterator<Item = usize>) -> f64 {
-    let mut values: Vec<f64> = nodes.filter_map(|n| plane_rms.get(n).copied()).collect();
-    if values.is_empty() {
-        return 0.0;
-    }
-    let middle = values.len() / 2;
-    *values.select_nth_unstable_by(middle, f64::total_cmp).1
+    crate::util::stats::median(nodes.filter_map(|n| plane_rms.get(n).copied())).unwrap_or(0.0)
 }
 
 /// A candidate split of a group.

@@ -11,6 +11,7 @@ use serde::Serialize;
 
 use crate::graph::components::Adjacency;
 use crate::graph::knn_pairs;
+use crate::graph::local_shape;
 use crate::graph::neighbours::Neighbours;
 use crate::graph::points::PointSet;
 use crate::scene::Reconstruction;
@@ -67,8 +68,15 @@ pub struct ForegroundOptions {
     /// Neighbours over which the normal coherence that tells stems from leaves is measured.
     pub stem_neighbours: usize,
     /// A point is on a stem when the median `|n_i · n_p|` of its neighbours' normals is below
-    /// this (see [`crate::graph::local_shape::normal_coherence`]).
+    /// this (see [`crate::graph::local_shape::normal_coherence`]) and below what a flat sheet
+    /// with the points' spacing and noise reaches (see `max_flat_stem_share`).
     pub max_stem_coherence: f64,
+    /// The share of a flat sheet's points, sampled with the measured spacing and noise, that
+    /// the stem test may call stem ([`crate::graph::local_shape::flat_sheet_coherence`]):
+    /// where the noise is large against the spacing the threshold drops below
+    /// `max_stem_coherence`, so small noisy leaves are not taken for stems.
+    #[serde(default = "default_max_flat_stem_share")]
+    pub max_flat_stem_share: f64,
     pub seed: u64,
 }
 
@@ -81,10 +89,18 @@ impl Default for ForegroundOptions {
             min_cluster_points: 30,
             stem_neighbours: 20,
             max_stem_coherence: 0.9,
+            max_flat_stem_share: default_max_flat_stem_share(),
             seed: 1,
         }
     }
 }
+
+fn default_max_flat_stem_share() -> f64 {
+    0.05
+}
+
+/// Normals of the stem test come from this many neighbours.
+const STEM_NORMAL_NEIGHBOURS: usize = 8;
 
 /// The result: a class per point and the geometry found.
 #[derive(Clone, Debug, Serialize)]
@@ -356,17 +372,24 @@ pub fn separate_foreground(
     // Stems: points whose surroundings turn around a thin tube (incoherent normals).
     let plant: Vec<usize> = (0..n).filter(|&i| class[i] == PointClass::Plant).collect();
     let plant_points = points.subset(&plant);
-    let normals: Vec<Vector3<f64>> = crate::graph::local_shape::local_shapes(&plant_points, 8)
-        .iter()
-        .map(|s| s.normal)
-        .collect();
-    let coherence = crate::graph::local_shape::normal_coherence(
-        &plant_points,
-        &normals,
+    let normals: Vec<Vector3<f64>> =
+        local_shape::local_shapes(&plant_points, STEM_NORMAL_NEIGHBOURS)
+            .iter()
+            .map(|s| s.normal)
+            .collect();
+    let coherence = local_shape::normal_coherence(&plant_points, &normals, options.stem_neighbours);
+    let planes = local_shape::local_planes(&plant_points, local_shape::PLANE_NEIGHBOURS);
+    let flat = local_shape::flat_sheet_coherence(
+        local_shape::median_spacing(&plant_points),
+        median(planes.iter().map(|p| p.rms)).unwrap_or(0.0),
+        STEM_NORMAL_NEIGHBOURS,
         options.stem_neighbours,
+        options.max_flat_stem_share,
     );
+    let stem_coherence = options.max_stem_coherence.min(flat);
+    tracing::debug!(flat, stem_coherence, "stem test threshold");
     for (local, &c) in coherence.iter().enumerate() {
-        if c < options.max_stem_coherence {
+        if c < stem_coherence {
             class[plant[local]] = PointClass::Stem;
         }
     }
