@@ -213,6 +213,44 @@ fn main() -> Result<()> {
                 .or_insert(0) += 1;
         }
     }
+    // Facing of the leaf segments that recover a leaf (the classifier's MIN_LEAF_FACING).
+    let mut facings: Vec<f64> = scores
+        .matches
+        .iter()
+        .filter_map(|m| {
+            let segment = segmentation
+                .segments
+                .iter()
+                .find(|s| s.leaf_id == Some(m.segment as u32))?;
+            let nodes: Vec<usize> = segment
+                .points
+                .iter()
+                .filter_map(|g| local.get(g).copied())
+                .collect();
+            Some(
+                nodes
+                    .iter()
+                    .map(|&l| {
+                        segmentation.graph.normals[l]
+                            .dot(&segment.shape.normal())
+                            .abs()
+                    })
+                    .sum::<f64>()
+                    / nodes.len().max(1) as f64,
+            )
+        })
+        .collect();
+    facings.sort_by(f64::total_cmp);
+    if !facings.is_empty() {
+        let q = |f: f64| facings[((facings.len() - 1) as f64 * f).round() as usize];
+        println!(
+            "facing of matched leaf segments: min {:.3} q01 {:.3} q05 {:.3} median {:.3}",
+            q(0.0),
+            q(0.01),
+            q(0.05),
+            q(0.5)
+        );
+    }
     for (segment, content) in extra {
         let mut top: Vec<(String, usize)> = content.into_iter().collect();
         top.sort_by_key(|(w, c)| (std::cmp::Reverse(*c), w.clone()));

@@ -146,7 +146,7 @@ pub fn median_spacing(points: &PointSet) -> f64 {
     median(distances).unwrap_or(0.0)
 }
 
-/// Points simulated on a flat sheet for [`flat_sheet_coherence`].
+/// Points simulated on a [`FlatSheet`].
 const SIMULATED_SHEET_POINTS: usize = 3000;
 
 /// A flat square sheet in the xy-plane sampled uniformly at random (a Poisson process whose
@@ -177,47 +177,62 @@ fn simulated_sheet(spacing: f64, sigma: f64) -> PointSet {
     }
 }
 
-/// Neighbours of the local planes whose RMS [`flat_sheet_coherence`] matches.
+/// Neighbours of the local planes whose RMS [`FlatSheet::like`] matches.
 pub const PLANE_NEIGHBOURS: usize = 10;
 
-/// The normal coherence ([`normal_coherence`] over `coherence_k` neighbours of normals from
-/// `normal_k` neighbours) that all but a fraction `share` of a flat sheet's points reach when
-/// the sheet is sampled like the measured points: at random with median nearest-neighbour
-/// distance `spacing`, and with the isotropic noise whose median local plane RMS (over
-/// [`PLANE_NEIGHBOURS`]) is `plane_rms`. Where the noise is small against the spacing this is
-/// near 1; where it is not, a flat leaf's normals scatter and a fixed coherence threshold
-/// would call it a stem. Found by simulation (the noise by bisection on the plane RMS).
-pub fn flat_sheet_coherence(
-    spacing: f64,
-    plane_rms: f64,
-    normal_k: usize,
-    coherence_k: usize,
-    share: f64,
-) -> f64 {
-    if !(spacing > 0.0) || !(plane_rms > 0.0) {
-        return 1.0;
-    }
-    let sheet_rms = |sigma: f64| {
-        let sheet = simulated_sheet(spacing, sigma);
-        median(local_planes(&sheet, PLANE_NEIGHBOURS).iter().map(|p| p.rms)).unwrap_or(0.0)
-    };
-    // The plane RMS grows with the noise: bisect for the noise that gives the measured one.
-    let (mut low, mut high) = (0.0, 4.0 * plane_rms);
-    for _ in 0..12 {
-        let middle = 0.5 * (low + high);
-        if sheet_rms(middle) < plane_rms {
-            low = middle;
-        } else {
-            high = middle;
+/// A simulated flat sheet sampled like measured points: at random with their median
+/// nearest-neighbour distance, and with the isotropic noise whose median local plane RMS (over
+/// [`PLANE_NEIGHBOURS`]) is theirs. What a flat leaf's points would show at that noise, for the
+/// tests whose fixed thresholds assume clean normals.
+pub struct FlatSheet {
+    points: PointSet,
+}
+
+impl FlatSheet {
+    /// The sheet for a median spacing `spacing` and median plane RMS `plane_rms` (the noise
+    /// found by bisection); `None` unless both are positive.
+    pub fn like(spacing: f64, plane_rms: f64) -> Option<Self> {
+        if !(spacing > 0.0) || !(plane_rms > 0.0) {
+            return None;
         }
+        let sheet_rms = |sigma: f64| {
+            let sheet = simulated_sheet(spacing, sigma);
+            median(local_planes(&sheet, PLANE_NEIGHBOURS).iter().map(|p| p.rms)).unwrap_or(0.0)
+        };
+        // The plane RMS grows with the noise: bisect for the noise that gives the measured one.
+        let (mut low, mut high) = (0.0, 4.0 * plane_rms);
+        for _ in 0..12 {
+            let middle = 0.5 * (low + high);
+            if sheet_rms(middle) < plane_rms {
+                low = middle;
+            } else {
+                high = middle;
+            }
+        }
+        Some(Self {
+            points: simulated_sheet(spacing, 0.5 * (low + high)),
+        })
     }
-    let sheet = simulated_sheet(spacing, 0.5 * (low + high));
-    let normals: Vec<nalgebra::Vector3<f64>> = local_shapes(&sheet, normal_k)
-        .iter()
-        .map(|s| s.normal)
-        .collect();
-    let mut coherence = normal_coherence(&sheet, &normals, coherence_k);
-    stats::quantile(&mut coherence, share)
+
+    /// The normal coherence ([`normal_coherence`] over `coherence_k` neighbours of normals
+    /// from `normal_k` neighbours) that all but a fraction `share` of the sheet's points reach.
+    /// Near 1 where the noise is small against the spacing; where it is not, a flat leaf's
+    /// normals scatter and a fixed coherence threshold would call it a stem.
+    pub fn coherence(&self, normal_k: usize, coherence_k: usize, share: f64) -> f64 {
+        let normals: Vec<nalgebra::Vector3<f64>> = local_shapes(&self.points, normal_k)
+            .iter()
+            .map(|s| s.normal)
+            .collect();
+        let mut coherence = normal_coherence(&self.points, &normals, coherence_k);
+        stats::quantile(&mut coherence, share)
+    }
+
+    /// Mean `|n · z|` of the sheet's normals from `normal_k` neighbours against its true normal:
+    /// how far noise alone lowers a leaf's facing.
+    pub fn facing(&self, normal_k: usize) -> f64 {
+        let normals = local_planes(&self.points, normal_k);
+        normals.iter().map(|p| p.normal.z.abs()).sum::<f64>() / normals.len().max(1) as f64
+    }
 }
 
 #[cfg(test)]

@@ -14,12 +14,14 @@ use super::foreground::{
 };
 use crate::graph::components::Adjacency;
 use crate::graph::gradient::GradientImage;
+use crate::graph::local_shape::{FlatSheet, PLANE_NEIGHBOURS, median_spacing};
 use crate::graph::ncut::{NcutOptions, NcutStats, median_noise, recursive_ncut, sheet_tolerance};
 use crate::graph::points::PointSet;
 use crate::graph::shape::Shape;
 use crate::graph::{GraphOptions, PointGraph, ViewData};
 use crate::scene::{Scene, SceneError};
 use crate::util::progress::Progress;
+use crate::util::stats::median;
 
 /// All parameters of the automatic segmentation.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, serde::Deserialize)]
@@ -324,9 +326,13 @@ fn merge_sheets(
     }
 }
 
-/// Mean `|n_i · n̄|` a leaf's point normals keep with its plane normal (≥ 0.8: within ~37°
-/// on average, a leaf bent by up to ~75°); a piece of stem surface averages about 2/π ≈ 0.64.
-const MIN_LEAF_FACING: f64 = 0.8;
+/// Mean `|n_i · n̄|` a leaf's point normals keep with its plane normal, with clean normals: a
+/// leaf bent evenly by θ along its midrib averages `sin(θ/2)/(θ/2)` (0.93 at the 75° the
+/// synthetic leaves reach), cupping across the blade lowers it a little; a piece of stem
+/// surface averages `2/π ≈ 0.64` all round and 0.83–0.89 on the 95–110° arcs the cameras see
+/// of a thick stem. Noisy normals lower every facing: the threshold is this times what a flat
+/// sheet with the points' spacing and noise keeps ([`FlatSheet::facing`]).
+const MIN_LEAF_FACING: f64 = 0.88;
 
 /// Labels a segment from its shape and place: a *stem* is long and thin; the *pot* is a low
 /// surface of revolution about the plant's vertical axis (nearly constant distance from it);
@@ -336,6 +342,7 @@ fn classify(
     points: &[Point3<f64>],
     normals: &[nalgebra::Vector3<f64>],
     noise: f64,
+    min_facing: f64,
     foreground: &Foreground,
     plant_height: f64,
     options: &NcutOptions,
@@ -388,7 +395,7 @@ fn classify(
         .map(|n| n.dot(&shape.normal()).abs())
         .sum::<f64>()
         / normals.len().max(1) as f64;
-    if facing >= MIN_LEAF_FACING
+    if facing >= min_facing
         && shape.cubic_sheet_residual(points.iter().copied())
             <= sheet_tolerance(options, shape, noise)
     {
@@ -529,6 +536,14 @@ pub fn segment_scene(
         .unwrap_or(0.0)
         .max(1e-9);
 
+    // Noise lowers a leaf's facing: compare with a flat sheet sampled like these points.
+    let flat_facing = FlatSheet::like(
+        median_spacing(&plant_points),
+        median(graph.plane_rms.iter().copied()).unwrap_or(0.0),
+    )
+    .map_or(1.0, |sheet| sheet.facing(PLANE_NEIGHBOURS));
+    let min_facing = MIN_LEAF_FACING * flat_facing;
+    tracing::debug!(flat_facing, min_facing, "leaf facing threshold");
     let mut segments = Vec::with_capacity(groups.len());
     let mut next_leaf = 0u32;
     for (id, group) in groups.iter().enumerate() {
@@ -545,6 +560,7 @@ pub fn segment_scene(
             &positions,
             &normals,
             noise,
+            min_facing,
             &foreground,
             plant_height,
             &options.ncut,

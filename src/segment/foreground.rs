@@ -72,7 +72,7 @@ pub struct ForegroundOptions {
     /// with the points' spacing and noise reaches (see `max_flat_stem_share`).
     pub max_stem_coherence: f64,
     /// The share of a flat sheet's points, sampled with the measured spacing and noise, that
-    /// the stem test may call stem ([`crate::graph::local_shape::flat_sheet_coherence`]):
+    /// the stem test may call stem ([`crate::graph::local_shape::FlatSheet::coherence`]):
     /// where the noise is large against the spacing the threshold drops below
     /// `max_stem_coherence`, so small noisy leaves are not taken for stems.
     #[serde(default = "default_max_flat_stem_share")]
@@ -379,13 +379,17 @@ pub fn separate_foreground(
             .collect();
     let coherence = local_shape::normal_coherence(&plant_points, &normals, options.stem_neighbours);
     let planes = local_shape::local_planes(&plant_points, local_shape::PLANE_NEIGHBOURS);
-    let flat = local_shape::flat_sheet_coherence(
+    let flat = local_shape::FlatSheet::like(
         local_shape::median_spacing(&plant_points),
         median(planes.iter().map(|p| p.rms)).unwrap_or(0.0),
-        STEM_NORMAL_NEIGHBOURS,
-        options.stem_neighbours,
-        options.max_flat_stem_share,
-    );
+    )
+    .map_or(1.0, |sheet| {
+        sheet.coherence(
+            STEM_NORMAL_NEIGHBOURS,
+            options.stem_neighbours,
+            options.max_flat_stem_share,
+        )
+    });
     let stem_coherence = options.max_stem_coherence.min(flat);
     tracing::debug!(flat, stem_coherence, "stem test threshold");
     for (local, &c) in coherence.iter().enumerate() {
