@@ -192,7 +192,8 @@ impl FlatSheet {
     /// The sheet for a median spacing `spacing` and median plane RMS `plane_rms` (the noise
     /// found by bisection); `None` unless both are positive.
     pub fn like(spacing: f64, plane_rms: f64) -> Option<Self> {
-        if !(spacing > 0.0) || !(plane_rms > 0.0) {
+        let measured = spacing > 0.0 && plane_rms > 0.0;
+        if !measured {
             return None;
         }
         let sheet_rms = |sigma: f64| {
@@ -275,5 +276,57 @@ mod tests {
         let normals: Vec<_> = local_shapes(&sheet, 8).iter().map(|s| s.normal).collect();
         let coherence = normal_coherence(&sheet, &normals, 20);
         assert!(coherence.iter().all(|&c| c > 0.99));
+    }
+
+    #[test]
+    fn median_spacing_of_a_grid_is_its_step() {
+        let grid = set(patch(
+            Point3::origin(),
+            Vector3::x(),
+            Vector3::y(),
+            20,
+            0.002,
+        ));
+        assert!((median_spacing(&grid) - 0.002).abs() < 1e-9);
+        assert_eq!(median_spacing(&set(vec![Point3::origin()])), 0.0);
+    }
+
+    #[test]
+    fn a_flat_sheet_like_noisy_points_has_their_plane_rms_and_scattered_normals() {
+        assert!(FlatSheet::like(0.0, 0.001).is_none());
+        assert!(FlatSheet::like(0.001, 0.0).is_none());
+        let spacing = 0.0015;
+        let mut coherences = Vec::new();
+        let mut facings = Vec::new();
+        for rms in [0.0001, 0.0003, 0.0005] {
+            let sheet = FlatSheet::like(spacing, rms).expect("sheet");
+            // The bisection found the noise that gives the asked plane RMS.
+            let measured = median(
+                local_planes(&sheet.points, PLANE_NEIGHBOURS)
+                    .iter()
+                    .map(|p| p.rms),
+            )
+            .expect("points");
+            assert!((measured - rms).abs() < 0.05 * rms, "{measured} for {rms}");
+            // And its spacing is the asked one, give or take what the noise adds.
+            let simulated_spacing = median_spacing(&sheet.points);
+            assert!(
+                (simulated_spacing - spacing).abs() < 0.25 * spacing,
+                "{simulated_spacing}"
+            );
+            coherences.push(sheet.coherence(8, 20, 0.05));
+            facings.push(sheet.facing(PLANE_NEIGHBOURS));
+        }
+        // Low noise: a flat sheet is coherent and faces one way; more noise lowers both.
+        assert!(coherences[0] > 0.95, "{coherences:?}");
+        assert!(
+            coherences[0] > coherences[1] && coherences[1] > coherences[2],
+            "{coherences:?}"
+        );
+        assert!(facings[0] > 0.99, "{facings:?}");
+        assert!(
+            facings[0] > facings[1] && facings[1] > facings[2],
+            "{facings:?}"
+        );
     }
 }

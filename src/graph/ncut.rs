@@ -367,4 +367,60 @@ mod tests {
         assert_eq!(groups.len(), 2, "{stats:?}");
         assert_eq!(stats.splits_bottleneck, 1);
     }
+
+    #[test]
+    fn a_small_noisy_leaf_is_a_sheet_within_the_noise_allowance_and_a_fold_is_not() {
+        // A flat 2 cm × 1 cm leaf sampled every 1.5 mm with 0.6 mm noise: its residual relative
+        // to its length is above the shape allowance alone, within the noise allowance.
+        let mut rng = crate::util::rng::Rng::seed_from(7);
+        let mut leaf = Vec::new();
+        for i in 0..14 {
+            for j in 0..7 {
+                leaf.push(Point3::new(
+                    i as f64 * 0.0015 + rng.normal() * 0.0006,
+                    j as f64 * 0.0015 + rng.normal() * 0.0006,
+                    rng.normal() * 0.0006,
+                ));
+            }
+        }
+        let shape = Shape::of(leaf.iter().copied());
+        let residual = shape.cubic_sheet_residual(leaf.iter().copied());
+        let options = NcutOptions::default();
+        let noise = 0.6 * 0.0006; // about what the local plane RMS measures at this noise
+        assert!(residual > options.max_sheet_residual, "{residual}");
+        assert!(
+            residual <= sheet_tolerance(&options, &shape, noise),
+            "{residual}"
+        );
+        // Without noise the tolerance is the shape allowance itself.
+        assert_eq!(
+            sheet_tolerance(&options, &shape, 0.0),
+            options.max_sheet_residual
+        );
+        // Two such leaves folded at a right angle are not one sheet, noise allowed.
+        let folded: Vec<Point3<f64>> = leaf
+            .iter()
+            .map(|p| {
+                if p.x > 0.01 {
+                    Point3::new(0.01 + p.z, p.y, p.x - 0.01)
+                } else {
+                    *p
+                }
+            })
+            .collect();
+        let shape = Shape::of(folded.iter().copied());
+        let residual = shape.cubic_sheet_residual(folded.iter().copied());
+        assert!(
+            residual > sheet_tolerance(&options, &shape, noise),
+            "{residual}"
+        );
+    }
+
+    #[test]
+    fn the_median_noise_reads_the_nodes_given() {
+        let rms = [0.1, 0.5, 0.2, 0.9];
+        assert_eq!(median_noise(&rms, [0usize, 2, 3].into_iter()), 0.2);
+        assert_eq!(median_noise(&rms, std::iter::empty()), 0.0);
+        assert_eq!(median_noise(&[], [0usize].into_iter()), 0.0);
+    }
 }
