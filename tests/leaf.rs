@@ -687,9 +687,10 @@ fn without_a_visible_stem_the_plant_is_leaves_only() {
 }
 
 /// The generic leaf's automatic candidates are tried best first and passed over when the
-/// photos cannot give them: on this small-leaved plant none of them can (the best-scored one
-/// is seen too obliquely in its view), which used to fail the whole reconstruction; now the
-/// elliptic generic leaf stands in (`template` null) and the leaves are fitted.
+/// photos cannot give them (a candidate whose best view shows no outline used to fail the whole
+/// reconstruction). Here every photo of a small-leaved plant is a flat grey, so no candidate has
+/// an image boundary: the elliptic generic leaf stands in (`template` null) and the leaves are
+/// still fitted from their points.
 #[test]
 fn a_generic_leaf_candidate_the_photos_cannot_give_is_passed_over() {
     static DIR: OnceLock<(TempDir, PathBuf)> = OnceLock::new();
@@ -698,11 +699,24 @@ fn a_generic_leaf_candidate_the_photos_cannot_give_is_passed_over() {
         SynthOptions {
             preset: Preset::Smallleaf,
             seed: 2,
+            views: 16,
+            width: 480,
+            height: 360,
             ..SynthOptions::default()
         },
     );
-    let out = tempfile::tempdir().unwrap();
-    let report = reconstruct_into(data, out.path());
-    assert!(report["template"].is_null());
+    let dir = tempfile::tempdir().unwrap();
+    let copy = dir.path().join("plant");
+    copy_dir(data, &copy);
+    for entry in std::fs::read_dir(copy.join("images")).unwrap() {
+        let path = entry.unwrap().path();
+        let (width, height) = image::image_dimensions(&path).unwrap();
+        image::RgbImage::from_pixel(width, height, image::Rgb([128, 128, 128]))
+            .save(&path)
+            .unwrap();
+    }
+    let out = dir.path().join("out");
+    let report = reconstruct_into(&copy, &out);
+    assert!(report["template"].is_null(), "{}", report["template"]);
     assert!(report["counts"]["leaves_fitted"].as_u64().unwrap() > 0);
 }
