@@ -95,16 +95,24 @@ fn segmentation(c: &mut Criterion) {
             ))
         })
     });
+    bench_whole_segmentation(&mut group, &scene);
+    group.finish();
+}
+
+/// The whole automatic segmentation of `scene`, with default options.
+fn bench_whole_segmentation(
+    group: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    scene: &Scene,
+) {
     group.bench_function("whole_segmentation", |b| {
         b.iter(|| {
             black_box(segment_scene(
-                &scene,
+                scene,
                 &SegmentOptions::default(),
                 &NoProgress,
             ))
         })
     });
-    group.finish();
 }
 
 /// The whole segmentation of ~500k points (the visibility filter keeps ~84 % of the target).
@@ -118,15 +126,7 @@ fn segmentation_500k(c: &mut Criterion) {
     group.bench_function("baseline_knn_pairs_k3", |b| {
         b.iter(|| black_box(knn_pairs(&points, 3)))
     });
-    group.bench_function("whole_segmentation", |b| {
-        b.iter(|| {
-            black_box(segment_scene(
-                &scene,
-                &SegmentOptions::default(),
-                &NoProgress,
-            ))
-        })
-    });
+    bench_whole_segmentation(&mut group, &scene);
     group.finish();
 }
 

@@ -50,13 +50,8 @@ fn main() -> Result<()> {
         .enumerate()
         .map(|(l, &g)| (g as u32, l))
         .collect();
-    let describe = |id: usize, leaf: Option<i64>| {
-        let segment = &segmentation.segments[id];
-        let positions: Vec<nalgebra::Point3<f64>> = segment
-            .points
-            .iter()
-            .map(|&g| segmentation.points.positions[g as usize])
-            .collect();
+    // A segment's graph nodes and its mean facing (as the classifier measures it).
+    let nodes_and_facing = |segment: &frond::segment::Segment| -> (Vec<usize>, f64) {
         let nodes: Vec<usize> = segment
             .points
             .iter()
@@ -71,6 +66,16 @@ fn main() -> Result<()> {
             })
             .sum::<f64>()
             / nodes.len().max(1) as f64;
+        (nodes, facing)
+    };
+    let describe = |id: usize, leaf: Option<i64>| {
+        let segment = &segmentation.segments[id];
+        let positions: Vec<nalgebra::Point3<f64>> = segment
+            .points
+            .iter()
+            .map(|&g| segmentation.points.positions[g as usize])
+            .collect();
+        let (nodes, facing) = nodes_and_facing(segment);
         let noise =
             frond::graph::ncut::median_noise(&segmentation.graph.plane_rms, nodes.iter().copied());
         let tolerance = frond::graph::ncut::sheet_tolerance(
@@ -222,22 +227,7 @@ fn main() -> Result<()> {
                 .segments
                 .iter()
                 .find(|s| s.leaf_id == Some(m.segment as u32))?;
-            let nodes: Vec<usize> = segment
-                .points
-                .iter()
-                .filter_map(|g| local.get(g).copied())
-                .collect();
-            Some(
-                nodes
-                    .iter()
-                    .map(|&l| {
-                        segmentation.graph.normals[l]
-                            .dot(&segment.shape.normal())
-                            .abs()
-                    })
-                    .sum::<f64>()
-                    / nodes.len().max(1) as f64,
-            )
+            Some(nodes_and_facing(segment).1)
         })
         .collect();
     facings.sort_by(f64::total_cmp);
