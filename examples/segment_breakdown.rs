@@ -116,8 +116,12 @@ fn main() -> Result<()> {
         }
     }
     println!(
-        "recall {:.3} ({}/{}), {} leaf segments",
-        scores.recall, scores.matched, scores.gt_leaves, scores.predicted_segments
+        "recall {:.3} ({}/{}), precision {:.3} ({} leaf segments)",
+        scores.recall,
+        scores.matched,
+        scores.gt_leaves,
+        scores.precision,
+        scores.predicted_segments
     );
     for (leaf, fates) in &by_gt {
         let total: usize = fates.values().sum();

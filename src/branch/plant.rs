@@ -16,17 +16,29 @@ use crate::segment::{Labels, SegmentLabel, Segmentation};
 use crate::util::geometry::concentric_circle_centre;
 
 /// Indices of the points a skeleton is built from (and branch strokes snap to): points the
-/// foreground found on thin tubes, and the points of segments labelled stem or other (never
-/// leaves or the pot).
+/// foreground found on thin tubes, also where a leaf took them back as its rim (a rachis or
+/// petiole along a leaf's edge lies on the leaf's sheet too; see
+/// [`crate::segment::borders`]), and the points of segments labelled stem or other (never the
+/// pot).
 pub fn skeleton_point_indices(foreground: &Foreground, labels: &Labels) -> Vec<u32> {
     (0..labels.segment_of.len())
         .filter(|&i| match labels.label_of_point(i) {
             Some(SegmentLabel::Stem | SegmentLabel::Other) => true,
-            Some(SegmentLabel::Leaf | SegmentLabel::Pot) => false,
-            None => foreground.class[i] == PointClass::Stem,
+            Some(SegmentLabel::Leaf) | None => foreground.class[i] == PointClass::Stem,
+            Some(SegmentLabel::Pot) => false,
         })
         .map(|i| i as u32)
         .collect()
+}
+
+/// Whether a point counts as sheet in the [`TubeTest`]: on a leaf or the pot, but not a leaf's
+/// rim that the stem test found on a tube.
+fn counts_as_sheet(foreground: &Foreground, labels: &Labels, i: usize) -> bool {
+    match labels.label_of_point(i) {
+        Some(SegmentLabel::Leaf) => foreground.class[i] != PointClass::Stem,
+        Some(SegmentLabel::Pot) => true,
+        _ => false,
+    }
 }
 
 /// Which candidate points are not the edge of a leaf or the pot: from photos the candidates
@@ -93,12 +105,7 @@ pub fn tube_point_indices(
             let around = neighbours.within_radius_unsorted(&positions[i as usize], radius);
             let sheet = around
                 .iter()
-                .filter(|found| {
-                    matches!(
-                        labels.label_of_point(found.index),
-                        Some(SegmentLabel::Leaf | SegmentLabel::Pot)
-                    )
-                })
+                .filter(|found| counts_as_sheet(&segmentation.foreground, labels, found.index))
                 .count();
             sheet as f64 <= test.max_sheet_share * around.len() as f64
         })

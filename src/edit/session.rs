@@ -12,6 +12,7 @@ use super::stroke::{Side, Stroke};
 use crate::branch::skeleton::SkeletonStats;
 use crate::branch::{BranchPoint, BranchTree};
 use crate::graph::maxflow::{CutSide, MaxFlow, MaxFlowError};
+use crate::graph::neighbours::Neighbours;
 use crate::pipeline::{EditCount, PlantState, SkeletonRun};
 use crate::scene::{ImageId, Scene};
 use crate::segment::boundary::{Boundary, BoundaryError, BoundaryOptions};
@@ -673,6 +674,29 @@ impl Session {
                 if d.is_finite() {
                     let capacity = 1.0 / (d * d + GRAPH_CUT_EPSILON);
                     flow.add_edge(i, j as usize, capacity, capacity)?;
+                }
+            }
+        }
+        // Members that are no graph node (leaf rims the segmentation took back from the stem
+        // test) follow the nearest member that is one.
+        let with_node: Vec<usize> = (0..members.len())
+            .filter(|&i| self.node_of[members[i] as usize].is_some())
+            .collect();
+        if with_node.len() < members.len() {
+            let positions = &self.segmentation.points.positions;
+            if let Ok(index) =
+                Neighbours::new(with_node.iter().map(|&i| positions[members[i] as usize]))
+            {
+                let sigma = std::f64::consts::SQRT_2 * graph.sigma_3d.max(1e-12);
+                for (i, &p) in members.iter().enumerate() {
+                    if self.node_of[p as usize].is_some() {
+                        continue;
+                    }
+                    if let Some(nearest) = index.nearest(&positions[p as usize]) {
+                        let d = nearest.distance() / sigma;
+                        let capacity = 1.0 / (d * d + GRAPH_CUT_EPSILON);
+                        flow.add_edge(i, with_node[nearest.index], capacity, capacity)?;
+                    }
                 }
             }
         }

@@ -228,6 +228,20 @@ impl FlatSheet {
         stats::quantile(&mut coherence, share)
     }
 
+    /// How a flat sheet's neighbourhoods of `k` points look at this spacing and noise: the
+    /// elongation ([`LocalShape::elongation`]) all but a fraction `share` of its points reach,
+    /// and the thickness ([`LocalShape::thickness`]) all but that fraction stay under. A point
+    /// whose neighbourhood is more line-like or thicker than that is not on a sheet.
+    pub fn local_shape_bounds(&self, k: usize, share: f64) -> (f64, f64) {
+        let shapes = local_shapes(&self.points, k);
+        let mut elongation: Vec<f64> = shapes.iter().map(|s| s.elongation).collect();
+        let mut thickness: Vec<f64> = shapes.iter().map(|s| s.thickness).collect();
+        (
+            stats::quantile(&mut elongation, share),
+            stats::quantile(&mut thickness, 1.0 - share),
+        )
+    }
+
     /// Mean `|n · z|` of the sheet's normals from `normal_k` neighbours against its true normal:
     /// how far noise alone lowers a leaf's facing.
     pub fn facing(&self, normal_k: usize) -> f64 {
@@ -276,6 +290,43 @@ mod tests {
         let normals: Vec<_> = local_shapes(&sheet, 8).iter().map(|s| s.normal).collect();
         let coherence = normal_coherence(&sheet, &normals, 20);
         assert!(coherence.iter().all(|&c| c > 0.99));
+    }
+
+    #[test]
+    fn a_flat_sheets_neighbourhoods_bound_lines_out_and_let_sheets_in() {
+        let spacing = 0.002;
+        let sheet = FlatSheet::like(spacing, 0.0003).unwrap();
+        let (min_elongation, max_thickness) = sheet.local_shape_bounds(8, 0.05);
+        assert!(
+            min_elongation > 0.2 && min_elongation < 0.9,
+            "{min_elongation}"
+        );
+        assert!(
+            max_thickness > 0.0 && max_thickness < 0.6,
+            "{max_thickness}"
+        );
+        // A twig sampled as a line of points is too narrow for a sheet.
+        let line = set((0..40)
+            .map(|k| Point3::new(k as f64 * spacing, 0.0001 * (k % 3) as f64, 0.0))
+            .collect());
+        let line_shapes = local_shapes(&line, 8);
+        assert!(line_shapes.iter().all(|s| s.elongation < min_elongation));
+        // Most points of a bent sheet sampled at that spacing pass both bounds.
+        let bent = set((0..900)
+            .map(|k| {
+                let (x, y) = ((k % 30) as f64 * spacing, (k / 30) as f64 * spacing);
+                Point3::new(x, y, 2.0 * x * x)
+            })
+            .collect());
+        let passing = local_shapes(&bent, 8)
+            .iter()
+            .filter(|s| s.elongation >= min_elongation && s.thickness <= max_thickness)
+            .count();
+        assert!(
+            passing * 10 >= bent.len() * 9,
+            "{passing} of {}",
+            bent.len()
+        );
     }
 
     #[test]

@@ -94,17 +94,22 @@ impl Shape {
         &self,
         points: impl Iterator<Item = Point3<f64>>,
     ) -> f64 {
+        self.fit_height_field::<N>(points)
+            .map_or(f64::INFINITY, |(_, rms)| rms)
+    }
+
+    /// Least-squares coefficients of a height field with the first `N` of the
+    /// [`cubic_monomials`] over the PCA plane, in coordinates relative to the length, and its
+    /// relative RMS residual. `None` for fewer than `N` points or a singular fit.
+    fn fit_height_field<const N: usize>(
+        &self,
+        points: impl Iterator<Item = Point3<f64>>,
+    ) -> Option<([f64; 10], f64)> {
         let mut normal_matrix = nalgebra::SMatrix::<f64, N, N>::zeros();
         let mut rhs = nalgebra::SVector::<f64, N>::zeros();
         let mut samples = Vec::new();
-        let scale = self.length().max(1e-12);
         for p in points {
-            let d = p - self.centroid;
-            let (u, v, w) = (
-                d.dot(&self.axes[0]) / scale,
-                d.dot(&self.axes[1]) / scale,
-                d.dot(&self.axes[2]) / scale,
-            );
+            let (u, v, w) = self.relative_coordinates(&p);
             let all = cubic_monomials(u, v);
             let basis = nalgebra::SVector::<f64, N>::from_fn(|i, _| all[i]);
             normal_matrix += basis * basis.transpose();
@@ -112,17 +117,66 @@ impl Shape {
             samples.push((basis, w));
         }
         if samples.len() < N {
-            return f64::INFINITY;
+            return None;
         }
         let regularised = normal_matrix + nalgebra::SMatrix::<f64, N, N>::identity() * 1e-9;
-        let Some(coefficients) = regularised.cholesky().map(|c| c.solve(&rhs)) else {
-            return f64::INFINITY;
-        };
+        let coefficients = regularised.cholesky()?.solve(&rhs);
         let squares: f64 = samples
             .iter()
             .map(|(basis, w)| (basis.dot(&coefficients) - w).powi(2))
             .sum();
-        (squares / samples.len() as f64).sqrt()
+        let mut all = [0.0; 10];
+        for (a, c) in all.iter_mut().zip(coefficients.iter()) {
+            *a = *c;
+        }
+        Some((all, (squares / samples.len() as f64).sqrt()))
+    }
+
+    /// A point's coordinates in the PCA frame (main axis, second axis, normal) about the
+    /// centroid, divided by the length.
+    fn relative_coordinates(&self, p: &Point3<f64>) -> (f64, f64, f64) {
+        let scale = self.length().max(1e-12);
+        let d = p - self.centroid;
+        (
+            d.dot(&self.axes[0]) / scale,
+            d.dot(&self.axes[1]) / scale,
+            d.dot(&self.axes[2]) / scale,
+        )
+    }
+
+    /// The quadratic height field (the surface [`Shape::sheet_residual`] measures against)
+    /// fitted to `points`, to tell how far other points lie from the same sheet. `None` for
+    /// fewer than 6 points or a degenerate group.
+    pub fn quadratic_sheet(&self, points: impl Iterator<Item = Point3<f64>>) -> Option<Sheet> {
+        let (coefficients, rms) = self.fit_height_field::<6>(points)?;
+        Some(Sheet {
+            shape: *self,
+            coefficients,
+            rms: rms * self.length(),
+        })
+    }
+}
+
+/// A smooth sheet fitted to a point group: a polynomial height field over its PCA plane.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sheet {
+    shape: Shape,
+    coefficients: [f64; 10],
+    /// RMS distance of the fitted points from the sheet (world units).
+    pub rms: f64,
+}
+
+impl Sheet {
+    /// Distance of a point from the sheet along its plane's normal (world units); the height
+    /// field is extrapolated beyond the fitted points, so this is meant for points near them.
+    pub fn distance(&self, p: &Point3<f64>) -> f64 {
+        let (u, v, w) = self.shape.relative_coordinates(p);
+        let height: f64 = cubic_monomials(u, v)
+            .iter()
+            .zip(&self.coefficients)
+            .map(|(m, c)| m * c)
+            .sum();
+        (w - height).abs() * self.shape.length()
     }
 }
 
@@ -158,5 +212,41 @@ mod tests {
         crossed.extend(bent.iter().map(|p| Point3::new(p.x, p.z, p.y)));
         let shape = Shape::of(crossed.iter().copied());
         assert!(shape.sheet_residual(crossed.iter().copied()) > 0.03);
+    }
+
+    #[test]
+    fn a_fitted_sheet_measures_how_far_points_lie_from_it() {
+        let surface = |u: f64, v: f64| 0.5 * u * u - 0.2 * v * v + 0.1 * u;
+        let points: Vec<Point3<f64>> = (0..600)
+            .map(|k| {
+                let (u, v) = ((k % 30) as f64 / 30.0 * 0.2, (k / 30) as f64 / 20.0 * 0.1);
+                Point3::new(u, v, surface(u, v))
+            })
+            .collect();
+        let shape = Shape::of(points.iter().copied());
+        let sheet = shape.quadratic_sheet(points.iter().copied()).unwrap();
+        // The parabola, tilted by the PCA frame, is nearly a quadratic height field over it.
+        assert!(sheet.rms < 5e-5, "{}", sheet.rms);
+        // On the surface, also a little beyond the fitted points: on the sheet.
+        for (u, v) in [(0.1, 0.05), (0.21, 0.05), (0.1, -0.01)] {
+            let on = Point3::new(u, v, surface(u, v));
+            assert!(
+                sheet.distance(&on) < 1e-4,
+                "({u}, {v}): {}",
+                sheet.distance(&on)
+            );
+        }
+        // Lifted off it along the surface's normal by 1 mm.
+        let (u, v) = (0.1, 0.05);
+        let normal = nalgebra::Vector3::new(-(u + 0.1), 0.4 * v, 1.0).normalize();
+        let off = Point3::new(u, v, surface(u, v)) + normal * 0.001;
+        let d = sheet.distance(&off);
+        assert!((d - 0.001).abs() < 1.5e-4, "{d}");
+        // Too few points for a quadratic.
+        assert!(
+            shape
+                .quadratic_sheet(points.iter().copied().take(5))
+                .is_none()
+        );
     }
 }

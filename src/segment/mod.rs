@@ -4,6 +4,7 @@
 //!   3D/2D weights ([`crate::graph`]) → threshold partition → recursive normalized cut →
 //!   leaf / stem / pot / other segments. Takes a [`crate::scene::Scene`]; returns a
 //!   [`Segmentation`] (points, foreground, segments, the graph the edits re-cut).
+//! - [`borders`]: leaf rims the stem test took, given back to their leaves.
 //! - [`foreground`]: plant / pot / floor / background separation and the plant's up axis.
 //! - [`labels`]: the current labels (segment per point, state per segment) as plain data; the
 //!   editing session changes them, later stages read them.
@@ -11,6 +12,7 @@
 //! - [`boundary`]: image boundaries (§5.4): watershed superpixels and a two-label graph cut.
 
 pub mod automatic;
+pub mod borders;
 pub mod boundary;
 pub mod foreground;
 pub mod labels;
