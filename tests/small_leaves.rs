@@ -2,6 +2,9 @@
 //! 20–120 points, points with 0.1 % of the plant height of noise, comparable to the point
 //! spacing) is segmented into its leaves. Before the sheet tests allowed for the points' noise
 //! almost every small leaf was called rough and left out (recall 0.003–0.038 on seeds 1–5).
+//! Measured on this plant: recall 0.616, precision 0.909 with the noise-aware sheet tests;
+//! 0.670 and 0.956 once leaf rims and small leaves the stem test took are given back
+//! (`segment::borders`).
 
 mod common;
 
@@ -51,6 +54,6 @@ fn most_small_leaves_are_segments_of_their_own() {
         scores.predicted_segments
     );
     assert!(scores.gt_leaves > 150, "{} leaves", scores.gt_leaves);
-    assert!(scores.recall >= 0.45, "recall {:.3}", scores.recall);
-    assert!(scores.precision >= 0.8, "precision {:.3}", scores.precision);
+    assert!(scores.recall >= 0.64, "recall {:.3}", scores.recall);
+    assert!(scores.precision >= 0.93, "precision {:.3}", scores.precision);
 }
