@@ -55,5 +55,9 @@ fn most_small_leaves_are_segments_of_their_own() {
     );
     assert!(scores.gt_leaves > 150, "{} leaves", scores.gt_leaves);
     assert!(scores.recall >= 0.64, "recall {:.3}", scores.recall);
-    assert!(scores.precision >= 0.93, "precision {:.3}", scores.precision);
+    assert!(
+        scores.precision >= 0.93,
+        "precision {:.3}",
+        scores.precision
+    );
 }

@@ -538,7 +538,7 @@ impl LeafParts<'_> {
             self.spacing,
             options,
         );
-        tracing::debug!(points = claimed.len(), "leaf borders given back");
+        tracing::debug!(points = claimed.len(), "leaf rim points given back");
         let mut grown = std::collections::BTreeSet::new();
         for (point, leaf) in claimed {
             let s = leaf_segments[leaf as usize];
@@ -638,7 +638,6 @@ impl LeafParts<'_> {
             self.refresh(s);
             found += 1;
         }
-        tracing::debug!(found, "small leaves found among stem points");
         found
     }
 }
@@ -829,7 +828,13 @@ pub fn segment_scene(
         noise_of_segment: &mut noise_of_segment,
         spacing,
     };
+    let phase = Instant::now();
     leaf_parts.give_back_borders(0, &options.borders);
+    tracing::debug!(
+        seconds = phase.elapsed().as_secs_f64(),
+        "leaf rims given back"
+    );
+    let phase = Instant::now();
     let typical = typical_leaf_points(leaf_parts.segments);
     let before = leaf_parts.segments.len();
     let found = leaf_parts.find_missed_leaves(
@@ -842,6 +847,11 @@ pub fn segment_scene(
         },
         plant_height,
         options,
+    );
+    tracing::debug!(
+        seconds = phase.elapsed().as_secs_f64(),
+        found,
+        "small leaves found among the stem points"
     );
     if found > 0 {
         leaf_parts.give_back_borders(before, &options.borders);
