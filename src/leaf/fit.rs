@@ -13,6 +13,24 @@ use crate::util::geometry::cubic_monomials;
 use crate::util::polygon::{inside_polygon, polygon_area};
 use crate::util::stats::quantile;
 
+/// The boundary warp may shrink the points' flat fit to a third of its area (a segment whose
+/// points spill over the leaf's margin) ...
+const MIN_WARP_AREA_RATIO: f64 = 0.33;
+
+/// ... and grow it threefold, or further where the image boundary itself encloses more: from
+/// photos, stereo often samples only part of a weakly textured leaf (on medium seed 3, leaves
+/// whose points cover 5 % of them), while the boundary follows the leaf's colour one superpixel
+/// beyond the points (its own guard against bleeding, [`crate::segment::boundary`]). A warp
+/// that grows the leaf half as much again as the boundary encloses has run off it.
+fn max_warp_area_ratio(boundary_area: f64, flat_area: f64) -> f64 {
+    let enclosed = if flat_area > 0.0 {
+        boundary_area / flat_area
+    } else {
+        0.0
+    };
+    (1.5 * enclosed).max(3.0)
+}
+
 /// Fitting settings.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LeafFitOptions {
@@ -655,11 +673,13 @@ pub fn fit_leaf(
                 },
                 150,
             );
-            boundary_area = Some(polygon_area(&projected));
+            let enclosed = polygon_area(&projected);
+            boundary_area = Some(enclosed);
             let outline = template.dense_outline(120);
             let (registered, report) = register_outline(&outline, &dense, affine, length, options);
             let area_ratio = registered.matrix.determinant() / affine.matrix.determinant();
-            if (0.33..=3.0).contains(&area_ratio)
+            if (MIN_WARP_AREA_RATIO..=max_warp_area_ratio(enclosed, flat_area))
+                .contains(&area_ratio)
                 && report.final_distance <= report.initial_distance
             {
                 affine = registered;
@@ -953,6 +973,51 @@ mod tests {
                 .iter()
                 .all(|p| p.iter().all(|c| c.is_finite()))
         );
+    }
+
+    #[test]
+    fn a_leaf_sampled_on_a_small_patch_grows_to_its_image_boundary() {
+        // Stereo sampled only the leaf's middle fifth along its length, a third of its width.
+        let (points, camera, camera_from_world) = leaf_scene();
+        let patch: Vec<Point3<f64>> = points
+            .into_iter()
+            .filter(|p| (p.x - 0.15).abs() < 0.01 && p.y.abs() < 0.007)
+            .collect();
+        assert!(patch.len() >= 20, "{} points", patch.len());
+        let polygon: Vec<[f64; 2]> = (0..100)
+            .map(|k| {
+                let t = std::f64::consts::TAU * k as f64 / 100.0;
+                let p = Point3::new(0.15 + 0.05 * t.cos(), 0.02 * t.sin(), 0.3 + 0.01 * t.cos());
+                let pixel = camera.project(&(camera_from_world * p).coords).unwrap();
+                [pixel.x, pixel.y]
+            })
+            .collect();
+        let view = BoundaryView {
+            polygon: &polygon,
+            camera: &camera,
+            camera_from_world,
+            image: None,
+        };
+        let fit = fit_leaf(
+            &patch,
+            &ellipse_template(),
+            &plant(),
+            Some(&view),
+            &LeafFitOptions::default(),
+        )
+        .unwrap();
+        let truth = std::f64::consts::PI * 0.05 * 0.02 * (1.0f64 + 0.04).sqrt();
+        // The points' own extent is about a tenth of the leaf; the warp takes the boundary.
+        assert!(fit.icp.is_some(), "{:?}", fit.notes);
+        assert!(
+            (fit.outline_area / truth - 1.0).abs() < 0.15,
+            "outline {} vs {truth}",
+            fit.outline_area
+        );
+        // The bound grows with what the boundary encloses, never below threefold.
+        assert!((max_warp_area_ratio(0.0, 1.0) - 3.0).abs() < 1e-12);
+        assert!((max_warp_area_ratio(10.0, 1.0) - 15.0).abs() < 1e-12);
+        assert!((max_warp_area_ratio(1.0, 0.0) - 3.0).abs() < 1e-12);
     }
 
     #[test]
