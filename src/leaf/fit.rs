@@ -908,6 +908,21 @@ mod tests {
         (points, camera, camera_from_world)
     }
 
+    /// The outline of [`leaf_scene`]'s leaf as the camera sees it (the image boundary).
+    fn leaf_outline_in_view(
+        camera: &crate::scene::Camera,
+        camera_from_world: &nalgebra::Isometry3<f64>,
+    ) -> Vec<[f64; 2]> {
+        (0..100)
+            .map(|k| {
+                let t = std::f64::consts::TAU * k as f64 / 100.0;
+                let p = Point3::new(0.15 + 0.05 * t.cos(), 0.02 * t.sin(), 0.3 + 0.01 * t.cos());
+                let pixel = camera.project(&(camera_from_world * p).coords).unwrap();
+                [pixel.x, pixel.y]
+            })
+            .collect()
+    }
+
     fn ellipse_template() -> LeafTemplate {
         let outline: Vec<Point2<f64>> = (0..64)
             .map(|k| {
@@ -929,14 +944,7 @@ mod tests {
     #[test]
     fn boundary_warp_recovers_the_outline_area() {
         let (points, camera, camera_from_world) = leaf_scene();
-        let polygon: Vec<[f64; 2]> = (0..100)
-            .map(|k| {
-                let t = std::f64::consts::TAU * k as f64 / 100.0;
-                let p = Point3::new(0.15 + 0.05 * t.cos(), 0.02 * t.sin(), 0.3 + 0.01 * t.cos());
-                let pixel = camera.project(&(camera_from_world * p).coords).unwrap();
-                [pixel.x, pixel.y]
-            })
-            .collect();
+        let polygon = leaf_outline_in_view(&camera, &camera_from_world);
         let photo = image::RgbImage::from_pixel(800, 600, image::Rgb([10, 200, 30]));
         let view = BoundaryView {
             polygon: &polygon,
@@ -984,14 +992,7 @@ mod tests {
             .filter(|p| (p.x - 0.15).abs() < 0.01 && p.y.abs() < 0.007)
             .collect();
         assert!(patch.len() >= 20, "{} points", patch.len());
-        let polygon: Vec<[f64; 2]> = (0..100)
-            .map(|k| {
-                let t = std::f64::consts::TAU * k as f64 / 100.0;
-                let p = Point3::new(0.15 + 0.05 * t.cos(), 0.02 * t.sin(), 0.3 + 0.01 * t.cos());
-                let pixel = camera.project(&(camera_from_world * p).coords).unwrap();
-                [pixel.x, pixel.y]
-            })
-            .collect();
+        let polygon = leaf_outline_in_view(&camera, &camera_from_world);
         let view = BoundaryView {
             polygon: &polygon,
             camera: &camera,

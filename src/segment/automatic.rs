@@ -965,15 +965,15 @@ mod tests {
         let mut segments = Vec::new();
         let mut noise_of_segment = Vec::new();
         let options = SegmentOptions::default();
-        let found = LeafParts {
+        let mut parts = LeafParts {
             positions: &points.positions,
             foreground: &mut foreground,
             point_segment: &mut point_segment,
             segments: &mut segments,
             noise_of_segment: &mut noise_of_segment,
             spacing,
-        }
-        .find_missed_leaves(
+        };
+        let found = parts.find_missed_leaves(
             &points,
             0.5 * noise,
             20,
@@ -984,17 +984,9 @@ mod tests {
             0.5,
             &options,
         );
-        let sizes: Vec<usize> = segments.iter().map(|s| s.num_points).collect();
+        let sizes: Vec<usize> = parts.segments.iter().map(|s| s.num_points).collect();
         assert_eq!(found, 1, "{sizes:?}");
-        LeafParts {
-            positions: &points.positions,
-            foreground: &mut foreground,
-            point_segment: &mut point_segment,
-            segments: &mut segments,
-            noise_of_segment: &mut noise_of_segment,
-            spacing,
-        }
-        .give_back_borders(0, &options.borders);
+        parts.give_back_borders(0, &options.borders);
         let members = &segments[0].points;
         let on_leaf = members.iter().filter(|&&p| (p as usize) < leaf).count();
         let elsewhere = members.len() - on_leaf;
