@@ -169,6 +169,115 @@ pub fn score_leaves(gt: &[i64], predicted: &[i64], options: &MatchingOptions) ->
     }
 }
 
+/// What a predicted leaf segment that matched no true leaf holds (its points' majority).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FalseLeafCause {
+    /// Mostly one true leaf that another segment matched: that leaf is over-segmented.
+    LeafFragment,
+    /// Mostly one true leaf that nothing matched: the segment covers too little of it.
+    PartialLeaf,
+    /// Mostly leaves, but several of them: touching leaves in one segment.
+    MergedLeaves,
+    /// Mostly stem, twig or petiole surface.
+    Stem,
+    /// Mostly the pot.
+    Pot,
+    /// Mostly the floor or soil.
+    Floor,
+    /// Mostly on no true surface (the stereo halo, outliers, the backdrop).
+    OffSurface,
+}
+
+/// The unmatched predicted leaf segments by what they hold.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct FalseLeaves {
+    /// Count per cause.
+    pub counts: BTreeMap<String, usize>,
+    /// `(segment, cause)` for each unmatched segment with enough points, by segment.
+    pub segments: Vec<(i64, FalseLeafCause)>,
+}
+
+/// Why each predicted leaf segment (with at least `min_leaf_points`) that `scores` did not
+/// match is not a leaf: `gt_leaf` and `gt_part` are the truth per predicted point (leaf id,
+/// −1 off leaves; [`crate::synth::scene::Part`]), `predicted` the predicted leaf id per point.
+pub fn false_leaves(
+    gt_leaf: &[i64],
+    gt_part: &[crate::synth::scene::Part],
+    predicted: &[i64],
+    scores: &LeafScores,
+    options: &MatchingOptions,
+) -> FalseLeaves {
+    use crate::synth::scene::Part;
+    let matched_segments: std::collections::HashSet<i64> =
+        scores.matches.iter().map(|m| m.segment).collect();
+    let matched_leaves: std::collections::HashSet<i64> =
+        scores.matches.iter().map(|m| m.gt_leaf).collect();
+    // Per unmatched segment: points per true leaf, and per non-leaf part.
+    let mut on_leaves: BTreeMap<i64, BTreeMap<i64, usize>> = BTreeMap::new();
+    let mut on_parts: BTreeMap<i64, [usize; 5]> = BTreeMap::new();
+    let n = gt_leaf.len().min(gt_part.len()).min(predicted.len());
+    for i in 0..n {
+        let s = predicted[i];
+        if s < 0 || matched_segments.contains(&s) {
+            continue;
+        }
+        if gt_leaf[i] >= 0 && gt_part[i] == Part::Leaf {
+            *on_leaves
+                .entry(s)
+                .or_default()
+                .entry(gt_leaf[i])
+                .or_insert(0) += 1;
+        } else {
+            on_parts.entry(s).or_insert([0; 5])[gt_part[i] as usize] += 1;
+        }
+    }
+    let mut segments: Vec<i64> = on_leaves.keys().chain(on_parts.keys()).copied().collect();
+    segments.sort_unstable();
+    segments.dedup();
+    let mut out = FalseLeaves::default();
+    for s in segments {
+        let leaves = on_leaves.get(&s);
+        let parts = on_parts.get(&s).copied().unwrap_or([0; 5]);
+        let leaf_points: usize = leaves.map_or(0, |l| l.values().sum());
+        let other_points: usize = parts.iter().sum();
+        let total = leaf_points + other_points;
+        if total < options.min_leaf_points {
+            continue;
+        }
+        let cause = if leaf_points >= other_points {
+            let (leaf, largest) = leaves
+                .and_then(|l| l.iter().max_by_key(|&(id, c)| (*c, -*id)))
+                .map_or((-1, 0), |(id, c)| (*id, *c));
+            if 2 * largest < leaf_points {
+                FalseLeafCause::MergedLeaves
+            } else if matched_leaves.contains(&leaf) {
+                FalseLeafCause::LeafFragment
+            } else {
+                FalseLeafCause::PartialLeaf
+            }
+        } else {
+            let part = (0..5)
+                .max_by_key(|&k| (parts[k], std::cmp::Reverse(k)))
+                .unwrap_or(4);
+            match part {
+                k if k == Part::Stem as usize => FalseLeafCause::Stem,
+                k if k == Part::Pot as usize => FalseLeafCause::Pot,
+                k if k == Part::Floor as usize => FalseLeafCause::Floor,
+                // Points paired with a leaf sample but no leaf id, or background.
+                _ => FalseLeafCause::OffSurface,
+            }
+        };
+        let name = serde_json::to_value(cause)
+            .ok()
+            .and_then(|v| v.as_str().map(str::to_owned))
+            .unwrap_or_default();
+        *out.counts.entry(name).or_insert(0) += 1;
+        out.segments.push((s, cause));
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -242,5 +351,49 @@ mod tests {
         assert_eq!(scores.recall, 1.0);
         assert!((scores.precision - 2.0 / 3.0).abs() < 1e-12);
         assert_eq!(scores.over_segmented, 1);
+    }
+
+    #[test]
+    fn unmatched_segments_are_told_apart_by_what_they_hold() {
+        use crate::synth::scene::Part;
+        let (mut gt, mut part, mut predicted) = (Vec::new(), Vec::new(), Vec::new());
+        let mut add = |leaf: i64, kind: Part, segment: i64, count: usize| {
+            for _ in 0..count {
+                gt.push(leaf);
+                part.push(kind);
+                predicted.push(segment);
+            }
+        };
+        // Leaf 0 is found by segment 10; segment 11 holds the rest of it.
+        add(0, Part::Leaf, 10, 40);
+        add(0, Part::Leaf, 11, 20);
+        // Segment 12 holds a third of leaf 1, which nothing found.
+        add(1, Part::Leaf, 12, 30);
+        add(1, Part::Leaf, -1, 70);
+        // Segment 13 holds a third of each of leaves 2, 3 and 4.
+        for leaf in 2..5 {
+            add(leaf, Part::Leaf, 13, 10);
+            add(leaf, Part::Leaf, -1, 20);
+        }
+        // A piece of stem, a piece of halo, and a stem crumb too small to score.
+        add(-1, Part::Stem, 14, 25);
+        add(-1, Part::Background, 15, 25);
+        add(-1, Part::Stem, 16, 10);
+        let options = MatchingOptions::default();
+        let scores = score_leaves(&gt, &predicted, &options);
+        assert_eq!(scores.matched, 1);
+        let found = false_leaves(&gt, &part, &predicted, &scores, &options);
+        assert_eq!(
+            found.segments,
+            vec![
+                (11, FalseLeafCause::LeafFragment),
+                (12, FalseLeafCause::PartialLeaf),
+                (13, FalseLeafCause::MergedLeaves),
+                (14, FalseLeafCause::Stem),
+                (15, FalseLeafCause::OffSurface),
+            ]
+        );
+        assert_eq!(found.counts["leaf_fragment"], 1);
+        assert_eq!(found.counts.values().sum::<usize>(), 5);
     }
 }

@@ -25,7 +25,10 @@ use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
 pub use align::{Similarity, umeyama};
-pub use metrics::{LeafScores, MatchingOptions, adjusted_rand_index, score_leaves};
+pub use metrics::{
+    FalseLeafCause, FalseLeaves, LeafScores, MatchingOptions, adjusted_rand_index, false_leaves,
+    score_leaves,
+};
 
 use crate::graph::neighbours::Neighbours;
 use crate::mesh::TriMesh;
@@ -359,6 +362,8 @@ pub struct EvalReport {
     /// ARI over all points.
     pub ari_all: f64,
     pub leaves: LeafScores,
+    /// The predicted leaf segments that match no true leaf, by what they hold.
+    pub false_leaves: FalseLeaves,
     pub leaf_geometry: Vec<LeafGeometryError>,
     pub chamfer_relative: Summary,
     pub area_relative_error: Summary,
@@ -514,6 +519,7 @@ pub fn evaluate(
         &predicted.iter().map(|&l| collapse(l)).collect::<Vec<_>>(),
     );
     let leaves = score_leaves(&gt_leaf, predicted, &options.matching);
+    let false_leaves = false_leaves(&gt_leaf, &gt_part, predicted, &leaves, &options.matching);
 
     let gt_leaf_by_id: HashMap<i64, &(GtLeafRecord, TriMesh)> =
         gt.leaves.iter().map(|l| (l.0.id as i64, l)).collect();
@@ -569,6 +575,7 @@ pub fn evaluate(
         area_relative_error: pick(|e| e.area_relative_error),
         normal_angle_deg: pick(|e| e.normal_angle_deg),
         leaves,
+        false_leaves,
         leaf_geometry,
         skeleton,
         compound,
@@ -619,6 +626,20 @@ impl EvalReport {
             },
             l.under_segmented
         );
+        if !self.false_leaves.segments.is_empty() {
+            let causes: Vec<String> = self
+                .false_leaves
+                .counts
+                .iter()
+                .map(|(cause, count)| format!("{count} {}", cause.replace('_', " ")))
+                .collect();
+            let _ = writeln!(
+                s,
+                "unmatched leaves:  {} segments: {}",
+                self.false_leaves.segments.len(),
+                causes.join(", ")
+            );
+        }
         let _ = writeln!(
             s,
             "leaf geometry:     {} leaves; Chamfer/length median {} mean {}; area error median {} mean {}; normal angle median {}",
