@@ -9,7 +9,7 @@ use serde::Deserialize;
 use super::{
     LeafOrgan, PlantOrgans, TRAITS_FORMAT, TRAITS_VERSION, TraitRow, TraitTable, TraitsError,
 };
-use crate::branch::plant::SkeletonFile;
+use crate::branch::plant::{SkeletonFile, SkeletonRecord};
 use crate::mesh::TriMesh;
 use crate::pipeline::ReconstructionReport;
 use crate::pipeline::files::SegmentsFile;
@@ -101,12 +101,70 @@ pub fn read_reconstruction(out: &Path, plant: &str) -> Result<PlantOrgans, Trait
             compound_leaf,
         });
     }
+    let mut branches = branches;
+    extend_to_tip_leaves(&mut branches, &mut leaves, &report.attachment.petioles);
     Ok(PlantOrgans {
         plant: plant.to_owned(),
         up_world: Vector3::from(segments.up),
         leaves,
         branches,
     })
+}
+
+/// A petiole leaving its branch at or beyond this arc fraction leaves from the tip.
+const TIP_FRACTION: f64 = 0.999;
+
+/// A branch whose tip carries a leaf is the organ up to that leaf's base: the skeleton ends
+/// where the branch's own points end (the leaf's segment takes the top of a petiole, the
+/// level sets stop half a level short of a tip), and the model draws a petiole from there to
+/// the leaf (`report.json`'s `attachment.petioles` at fraction 1). That petiole is appended
+/// to the branch's centreline and length, nearest leaf first; the insertion fractions on the
+/// branch (its children's and its leaves') are rescaled to the longer branch, so every
+/// insertion keeps its place.
+fn extend_to_tip_leaves(
+    branches: &mut [SkeletonRecord],
+    leaves: &mut [LeafOrgan],
+    petioles: &[crate::pipeline::PetioleRecord],
+) {
+    let mut extended: Vec<(u32, f64, u32)> = Vec::new();
+    for branch in branches.iter_mut() {
+        let Some(tip) = branch.centerline.last().map(|p| Point3::from(*p)) else {
+            continue;
+        };
+        let nearest_leaf_base = petioles
+            .iter()
+            .filter(|p| p.branch == branch.id && p.parent_fraction >= TIP_FRACTION)
+            .filter_map(|p| Some((p.leaf, leaves.iter().find(|l| l.id == p.leaf)?.base_world?)))
+            .map(|(leaf, base)| ((base - tip).norm(), base, leaf))
+            .filter(|(gap, _, _)| gap.is_finite() && *gap > 0.0)
+            .min_by(|a, b| a.0.total_cmp(&b.0).then(a.2.cmp(&b.2)));
+        let Some((gap, base, leaf)) = nearest_leaf_base else {
+            continue;
+        };
+        let length = super::branch_length(branch);
+        if !(length > 0.0) {
+            continue;
+        }
+        branch.centerline.push([base.x, base.y, base.z]);
+        branch.length = length + gap;
+        extended.push((branch.id, length / branch.length, leaf));
+    }
+    for (id, shrink, tip_leaf) in extended {
+        for child in branches.iter_mut().filter(|b| b.parent == Some(id)) {
+            child.parent_fraction *= shrink;
+        }
+        for leaf in leaves.iter_mut() {
+            if let Some((branch, fraction)) = leaf.branch.as_mut()
+                && *branch == id
+            {
+                *fraction = if leaf.id == tip_leaf {
+                    1.0
+                } else {
+                    *fraction * shrink
+                };
+            }
+        }
+    }
 }
 
 fn distance_to_vertices(mesh: &TriMesh, p: &Point3<f64>) -> f64 {
@@ -217,6 +275,107 @@ pub fn read_traits(path: &Path) -> Result<TraitTable, TraitsError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn straight(
+        id: u32,
+        parent: Option<u32>,
+        fraction: f64,
+        a: [f64; 3],
+        b: [f64; 3],
+    ) -> SkeletonRecord {
+        let samples = 11;
+        let centerline: Vec<[f64; 3]> = (0..samples)
+            .map(|k| {
+                let t = k as f64 / (samples - 1) as f64;
+                [0, 1, 2].map(|i| a[i] + t * (b[i] - a[i]))
+            })
+            .collect();
+        SkeletonRecord {
+            id,
+            parent,
+            parent_fraction: fraction,
+            control_points: vec![a, b],
+            radius_start: 0.003,
+            radius_end: 0.002,
+            length: (Point3::from(b) - Point3::from(a)).norm(),
+            centerline,
+            observed_length: None,
+            bridged_length: None,
+        }
+    }
+
+    fn leaf_at(id: u32, base: [f64; 3], branch: u32, fraction: f64) -> LeafOrgan {
+        LeafOrgan {
+            id,
+            mesh: TriMesh::default(),
+            base_world: Some(Point3::from(base)),
+            branch: Some((branch, fraction)),
+            synthesized: false,
+            compound_leaf: None,
+        }
+    }
+
+    fn petiole(
+        leaf: u32,
+        branch: u32,
+        parent_fraction: f64,
+        length: f64,
+    ) -> crate::pipeline::PetioleRecord {
+        crate::pipeline::PetioleRecord {
+            leaf,
+            branch,
+            parent_fraction,
+            length,
+        }
+    }
+
+    #[test]
+    fn a_branch_runs_on_to_the_leaf_at_its_tip_and_its_insertions_keep_their_place() {
+        // A 0.3 stem with a 0.1 side branch at its middle; the side branch's points stop
+        // 0.02 short of its leaf, a second leaf hangs 0.05 beyond its tip, a third from its
+        // middle, and a fourth from the stem's middle.
+        let mut branches = vec![
+            straight(0, None, 0.0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.3]),
+            straight(1, Some(0), 0.5, [0.0, 0.0, 0.15], [0.1, 0.0, 0.15]),
+            straight(2, Some(1), 0.4, [0.04, 0.0, 0.15], [0.04, 0.05, 0.15]),
+        ];
+        let mut leaves = vec![
+            leaf_at(10, [0.12, 0.0, 0.15], 1, 1.0),
+            leaf_at(11, [0.15, 0.0, 0.15], 1, 1.0),
+            leaf_at(12, [0.06, 0.03, 0.15], 1, 0.6),
+            leaf_at(13, [0.03, 0.0, 0.15], 0, 0.5),
+        ];
+        let petioles = vec![
+            petiole(11, 1, 1.0, 0.05),
+            petiole(10, 1, 1.0, 0.02),
+            petiole(12, 1, 0.6, 0.03),
+            petiole(13, 0, 0.5, 0.03),
+        ];
+        let stem_before = branches[0].clone();
+        extend_to_tip_leaves(&mut branches, &mut leaves, &petioles);
+        // The nearest tip leaf ends the branch; the stem, with no leaf at its tip, is as it was.
+        assert!((branches[1].length - 0.12).abs() < 1e-12);
+        assert_eq!(branches[1].centerline.last(), Some(&[0.12, 0.0, 0.15]));
+        assert!((branches[1].centerline_length() - 0.12).abs() < 1e-12);
+        assert_eq!(branches[0], stem_before);
+        // Insertions stay where they were: 0.04 and 0.06 along, now of 0.12.
+        assert!((branches[2].parent_fraction - 0.04 / 0.12).abs() < 1e-12);
+        let fraction = |id: u32| leaves.iter().find(|l| l.id == id).unwrap().branch.unwrap();
+        assert_eq!(fraction(10), (1, 1.0));
+        assert!((fraction(11).1 - 0.1 / 0.12).abs() < 1e-12);
+        assert!((fraction(12).1 - 0.06 / 0.12).abs() < 1e-12);
+        assert_eq!(fraction(13), (0, 0.5));
+        // The traits see the longer branch.
+        let organs = PlantOrgans {
+            plant: "p".into(),
+            up_world: Vector3::z(),
+            leaves,
+            branches,
+        };
+        let table = crate::traits::plant_traits(&organs, None);
+        let length = table.value("branch_001", "length").unwrap();
+        assert!((length - 0.12).abs() < 1e-12, "{length}");
+    }
 
     #[test]
     fn csv_fields_with_commas_and_quotes_are_quoted() {
