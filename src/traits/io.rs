@@ -120,8 +120,9 @@ const TIP_FRACTION: f64 = 0.999;
 /// (`report.json`'s `attachment.petioles` at fraction 1). The branch runs on to the point of
 /// the leaf's surface nearest its tip, where the petiole meets the blade (not to the fitted
 /// base point, the template's base, which on semi-dense broadleaf plants lies a median
-/// 8–25 mm from the true base of a 15–20 cm leaf), nearest leaf first; the insertion fractions on the branch (its children's and its leaves') are
-/// rescaled to the longer branch, so every insertion keeps its place.
+/// 8–25 mm from the true base of a 15–20 cm leaf); of several leaves there, the nearest.
+/// The insertion fractions on the branch (its children's and its leaves') are rescaled to
+/// the longer branch, so every insertion keeps its place, and the tip leaf sits at 1.
 fn extend_to_tip_leaves(
     branches: &mut [SkeletonRecord],
     leaves: &mut [LeafOrgan],
@@ -129,28 +130,30 @@ fn extend_to_tip_leaves(
 ) {
     let mut extended: Vec<(u32, f64, u32)> = Vec::new();
     for branch in branches.iter_mut() {
-        let Some(tip) = branch.centerline.last().map(|p| Point3::from(*p)) else {
+        let Some(tip_world) = branch.centerline.last().map(|p| Point3::from(*p)) else {
             continue;
         };
-        let nearest_leaf_base = petioles
+        let nearest_leaf = petioles
             .iter()
             .filter(|p| p.branch == branch.id && p.parent_fraction >= TIP_FRACTION)
             .filter_map(|p| {
                 let leaf = leaves.iter().find(|l| l.id == p.leaf)?;
-                let meets = nearest_on_mesh(&leaf.mesh, &tip).or(leaf.base_world)?;
-                Some((leaf.id, meets))
+                let meets_world = nearest_on_mesh(&leaf.mesh, &tip_world).or(leaf.base_world)?;
+                Some((leaf.id, meets_world))
             })
-            .map(|(leaf, meets)| ((meets - tip).norm(), meets, leaf))
+            .map(|(leaf, meets_world)| ((meets_world - tip_world).norm(), meets_world, leaf))
             .filter(|(gap, _, _)| gap.is_finite() && *gap > 0.0)
             .min_by(|a, b| a.0.total_cmp(&b.0).then(a.2.cmp(&b.2)));
-        let Some((gap, base, leaf)) = nearest_leaf_base else {
+        let Some((gap, meets_world, leaf)) = nearest_leaf else {
             continue;
         };
         let length = super::branch_length(branch);
         if !length.is_finite() || length <= 0.0 {
             continue;
         }
-        branch.centerline.push([base.x, base.y, base.z]);
+        branch
+            .centerline
+            .push([meets_world.x, meets_world.y, meets_world.z]);
         branch.length = length + gap;
         extended.push((branch.id, length / branch.length, leaf));
     }
