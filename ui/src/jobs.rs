@@ -3,7 +3,7 @@
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, TryRecvError, channel};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Condvar, Mutex};
 use std::time::Instant;
 
 use frond::util::progress::Progress;
@@ -49,6 +49,41 @@ impl JobProgress {
     }
 }
 
+/// Holds new workers before they start until it is opened or their job is cancelled, so a
+/// script (a test, a recorded demo) can act on a job that is certainly still running.
+#[derive(Default)]
+pub struct StartGate {
+    open: Mutex<bool>,
+    changed: Condvar,
+}
+
+impl StartGate {
+    /// Lets every held and every later worker start.
+    pub fn open(&self) {
+        *self.open.lock().unwrap_or_else(|e| e.into_inner()) = true;
+        self.changed.notify_all();
+    }
+
+    /// Whether workers may start.
+    pub fn is_open(&self) -> bool {
+        *self.open.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Waits until the gate opens or `progress` is cancelled (a cancelled worker starts and
+    /// stops at its first check).
+    fn wait(&self, progress: &JobProgress) {
+        let mut open = self.open.lock().unwrap_or_else(|e| e.into_inner());
+        while !*open && !progress.is_cancelled() {
+            // Cancellation is a flag, not a notification: look at it again every few ms.
+            open = self
+                .changed
+                .wait_timeout(open, std::time::Duration::from_millis(5))
+                .unwrap_or_else(|e| e.into_inner())
+                .0;
+        }
+    }
+}
+
 /// What polling a job gives.
 pub enum Poll<T> {
     Running,
@@ -71,10 +106,22 @@ impl<T: Send + 'static> Job<T> {
         title: impl Into<String>,
         work: impl FnOnce(&JobProgress) -> T + Send + 'static,
     ) -> Self {
+        Self::spawn_gated(title, None, work)
+    }
+
+    /// Starts `work` on a new thread that first waits at `gate` (when given).
+    pub fn spawn_gated(
+        title: impl Into<String>,
+        gate: Option<Arc<StartGate>>,
+        work: impl FnOnce(&JobProgress) -> T + Send + 'static,
+    ) -> Self {
         let progress = Arc::new(JobProgress::default());
         let (sender, receiver) = channel();
         let worker_progress = Arc::clone(&progress);
         std::thread::spawn(move || {
+            if let Some(gate) = gate {
+                gate.wait(&worker_progress);
+            }
             let result = work(&worker_progress);
             // The UI may have gone; nothing to do then.
             let _ = sender.send(result);
@@ -134,5 +181,53 @@ mod tests {
             }
         };
         assert_eq!(value, 42);
+    }
+
+    fn wait_for<T: Send + 'static>(job: &Job<T>) -> T {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+        loop {
+            match job.poll() {
+                Poll::Done(v) => return v,
+                Poll::Running => {
+                    assert!(
+                        std::time::Instant::now() < deadline,
+                        "worker never finished"
+                    );
+                    std::thread::sleep(std::time::Duration::from_millis(1));
+                }
+                Poll::Lost => panic!("worker lost"),
+            }
+        }
+    }
+
+    #[test]
+    fn a_closed_gate_holds_workers_until_opened_or_cancelled() {
+        let gate = Arc::new(StartGate::default());
+        let started = Arc::new(AtomicBool::new(false));
+        let flag = Arc::clone(&started);
+        let held = Job::spawn_gated("held", Some(Arc::clone(&gate)), move |progress| {
+            flag.store(true, Ordering::SeqCst);
+            progress.is_cancelled()
+        });
+        std::thread::sleep(std::time::Duration::from_millis(50));
+        assert!(
+            !started.load(Ordering::SeqCst),
+            "started through a closed gate"
+        );
+        assert!(matches!(held.poll(), Poll::Running));
+        // Cancelled while held: the worker starts and sees the cancellation.
+        held.progress.cancel();
+        assert!(wait_for(&held));
+        assert!(started.load(Ordering::SeqCst));
+
+        let next = Job::spawn_gated("next", Some(Arc::clone(&gate)), |progress| {
+            progress.is_cancelled()
+        });
+        assert!(!gate.is_open());
+        gate.open();
+        assert!(!wait_for(&next));
+        // An open gate lets later workers straight through.
+        let later = Job::spawn_gated("later", Some(gate), |_| 7);
+        assert_eq!(wait_for(&later), 7);
     }
 }

@@ -23,6 +23,7 @@ pub mod workspace;
 
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use egui::{Color32, Key, KeyboardShortcut, Modifiers, RichText};
@@ -188,6 +189,9 @@ pub struct FrondApp {
     pub benchmark: Option<Benchmark>,
     /// Fit the leaves as soon as the scene is open (`frond-ui --fit-leaves`).
     pub fit_leaves_when_open: bool,
+    /// When set, new workers wait here before starting (scripts and tests that act on a
+    /// running job, e.g. cancel it, whatever the machine's speed).
+    pub job_start_gate: Option<Arc<jobs::StartGate>>,
     title: String,
     /// Use the platform's file dialogs (when one is available; see `native`).
     native_dialogs: bool,
@@ -255,6 +259,7 @@ impl FrondApp {
             paint_times: VecDeque::new(),
             benchmark: None,
             fit_leaves_when_open: false,
+            job_start_gate: None,
             title: String::new(),
             native_dialogs: false,
             native: None,
@@ -338,8 +343,9 @@ impl FrondApp {
             return;
         }
         let worker_path = path.clone();
-        self.job = Some(Job::spawn(
+        self.job = Some(Job::spawn_gated(
             format!("Opening {}", path.display()),
+            self.job_start_gate.clone(),
             move |progress: &JobProgress| Outcome::Opened {
                 result: Workspace::open(&worker_path, progress)
                     .map(Box::new)
@@ -368,10 +374,14 @@ impl FrondApp {
         };
         self.panel.cancel_gesture();
         self.workspace_busy = true;
-        self.job = Some(Job::spawn(title, move |progress: &JobProgress| {
-            let result = work(&mut workspace, progress);
-            Outcome::Worked { workspace, result }
-        }));
+        self.job = Some(Job::spawn_gated(
+            title,
+            self.job_start_gate.clone(),
+            move |progress: &JobProgress| {
+                let result = work(&mut workspace, progress);
+                Outcome::Worked { workspace, result }
+            },
+        ));
     }
 
     /// Fits every leaf segment (seed 004 §6) on a worker thread.

@@ -676,7 +676,10 @@ fn fitting_runs_off_thread_can_be_cancelled_and_exports() {
     let mut harness = harness_with(dataset().to_path_buf(), config.path());
     let edits = history_len(&harness);
 
-    // Cancel at once: the session comes back untouched, without leaves.
+    // Cancel while it runs: the session comes back untouched, without leaves. The gate holds
+    // the worker until the cancel, so a fast machine cannot finish the fit first.
+    let gate = std::sync::Arc::new(frond_ui::jobs::StartGate::default());
+    harness.state_mut().job_start_gate = Some(std::sync::Arc::clone(&gate));
     harness.get_by_label("🍃  Fit leaves").click();
     harness.step();
     harness.step();
@@ -692,6 +695,7 @@ fn fitting_runs_off_thread_can_be_cancelled_and_exports() {
     );
     assert!(harness.state().workspace().unwrap().leaves.is_none());
     assert_eq!(history_len(&harness), edits);
+    gate.open();
 
     // Export fits first, then writes every format.
     let out = tempfile::tempdir().unwrap();
