@@ -19,8 +19,6 @@ const STROKE_STEP_PX: f64 = 4.0;
 const MAX_STROKE_SAMPLES: usize = 200;
 /// Among candidates within this many pixels of the nearest, the front-most is taken.
 const FRONT_TIE_PX: f64 = 2.0;
-/// A drawn branch starts with this share of its parent's radius there, and tapers to half.
-const CHILD_RADIUS_RATIO: f64 = 0.7;
 
 /// Why a branch edit could not be applied.
 #[derive(Debug, thiserror::Error)]
@@ -262,7 +260,7 @@ pub fn draw_in_view(
             })?,
         )
     };
-    let radii = branch_radii(parent.as_ref(), radius, snap.spacing, None)?;
+    let radii = branch_radii(tree, parent.as_ref(), radius, snap.spacing, None)?;
     let projected: Vec<(Point2<f64>, f64, u32)> = snap
         .candidates
         .iter()
@@ -420,7 +418,7 @@ pub fn draw_in_world(
         }
         Some(anchor)
     };
-    let radii = branch_radii(parent.as_ref(), radius, snap.spacing, Some(length))?;
+    let radii = branch_radii(tree, parent.as_ref(), radius, snap.spacing, Some(length))?;
     let traced = if parent.is_some() {
         &samples[1..]
     } else {
@@ -455,8 +453,13 @@ pub fn draw_in_world(
 }
 
 /// Radii of a new branch: the given ones (checked), else from the parent's radius at the
-/// attachment; a main stem gets 2 % of its length (at least a point spacing).
+/// attachment by the pipe model (Leonardo's rule: a parent's cross-section is shared by what
+/// it carries): with n children already on the parent, the new one starts at the parent's
+/// radius / √(n + 2), 0.71 of it for a first side branch and 0.29 for a petiole drawn from a
+/// stem that carries ten; a main stem gets 2 % of its length (at least a point spacing). It
+/// tapers to half its start.
 fn branch_radii(
+    tree: &BranchTree,
     parent: Option<&BranchPoint>,
     radius: Option<[f64; 2]>,
     spacing: f64,
@@ -466,7 +469,14 @@ fn branch_radii(
         return Ok((check_radius(start)?, check_radius(end)?));
     }
     let start = match parent {
-        Some(anchor) => CHILD_RADIUS_RATIO * anchor.radius,
+        Some(anchor) => {
+            let children = tree
+                .branches
+                .iter()
+                .filter(|b| b.parent == Some(anchor.branch))
+                .count();
+            anchor.radius / ((children + 2) as f64).sqrt()
+        }
         None => (0.02 * length.unwrap_or(0.0)).max(spacing),
     }
     .max(1e-9);
@@ -640,6 +650,39 @@ mod tests {
             cylinder: GeneralizedCylinder::new(spline, radius, radius),
             leaf_at_tip: false,
         }
+    }
+
+    #[test]
+    fn a_drawn_branch_shares_its_parent_with_its_siblings() {
+        let anchor = |branch: u32| BranchPoint {
+            branch,
+            fraction: 0.5,
+            position: Point3::origin(),
+            tangent: Vector3::z(),
+            radius: 0.012,
+            distance: 0.0,
+        };
+        let mut tree = BranchTree {
+            branches: vec![straight(0, None, [0.0; 3], [0.0, 0.0, 0.1], 0.012)],
+        };
+        // A first side branch: 1/√2 of its parent, tapering to half.
+        let (start, end) = branch_radii(&tree, Some(&anchor(0)), None, 1e-3, None).unwrap();
+        assert!((start - 0.012 / 2f64.sqrt()).abs() < 1e-12 && (end - 0.5 * start).abs() < 1e-15);
+        // Ten petioles already on the stem: the eleventh gets 1/√12 of it (3.5 mm, not 8.4).
+        for id in 1..=10 {
+            tree.branches
+                .push(straight(id, Some(0), [0.0; 3], [0.1, 0.0, 0.1], 0.003));
+        }
+        let (start, _) = branch_radii(&tree, Some(&anchor(0)), None, 1e-3, None).unwrap();
+        assert!((start - 0.012 / 12f64.sqrt()).abs() < 1e-12, "{start}");
+        // Children of other branches do not count; given radii are kept; a stem gets 2 % of
+        // its length.
+        let (start, _) = branch_radii(&tree, Some(&anchor(3)), None, 1e-3, None).unwrap();
+        assert!((start - 0.012 / 2f64.sqrt()).abs() < 1e-12);
+        let given = branch_radii(&tree, Some(&anchor(0)), Some([0.004, 0.002]), 1e-3, None);
+        assert_eq!(given.unwrap(), (0.004, 0.002));
+        let (stem, _) = branch_radii(&tree, None, None, 1e-3, Some(0.3)).unwrap();
+        assert!((stem - 0.006).abs() < 1e-12);
     }
 
     /// A pinhole 400 px wide looking down +z from z = −1 at the plane z = 0 (200 px per
