@@ -148,39 +148,12 @@ fn reconstructed_leaves_meet_the_accuracy_targets() {
     );
     let recall = eval["leaves"]["recall"].as_f64().unwrap();
     let chamfer = eval["chamfer_relative"]["median"].as_f64().unwrap();
-    stem_ends_at_its_crown(out);
     let area = eval["area_relative_error"]["median"].as_f64().unwrap();
     eprintln!("recall {recall:.3}, median Chamfer {chamfer:.4}, median area error {area:.3}");
     assert!(recall >= 0.9, "recall {recall}");
     // The broadleaf targets: median Chamfer ≤ 2 % of leaf length, area error ≤ 10 %.
     assert!(chamfer <= 0.02, "median Chamfer {chamfer}");
     assert!(area <= 0.10, "median area error {area}");
-}
-
-/// The 6 cm stem (radius 14 mm) under the plant's crown of 13–30 cm petioles is measured as
-/// the stem: its axis ends where the crown begins instead of running on into the longest
-/// petiole, and stands on the stem's axis from the soil instead of hooking out to the surface
-/// point the geodesic levels start from. Measured on this dataset: before, the true stem was
-/// matched by no branch (the predicted one, stem and petiole, was paired with that petiole
-/// at +24.5 %); now it is matched, 20.4 % long (it ends in the crown's knot).
-fn stem_ends_at_its_crown(out: &Path) {
-    let output = cargo_bin_cmd!("frond")
-        .args(["eval", "--json", "--traits", "--gt"])
-        .arg(dataset())
-        .arg("--pred")
-        .arg(out)
-        .output()
-        .unwrap();
-    assert!(output.status.success());
-    let traits: Value = serde_json::from_slice(&output.stdout).unwrap();
-    let stem = traits["branches"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|b| b["gt_branch"] == 0)
-        .unwrap_or_else(|| panic!("the true stem is matched by no branch: {traits}"));
-    let error = stem["length_relative_error"].as_f64().unwrap();
-    assert!(error <= 0.25, "stem length error {error}: {stem}");
 }
 
 #[test]
