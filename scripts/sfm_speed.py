@@ -72,6 +72,7 @@ def synthetic(args):
         sfm = sfm_json(os.path.join(out, "sfm"))
         row = {"seed": seed, "matcher": "frond", "photos_to_plant_s": total,
                "sfm_s": sum(sfm["timings"].values()), "registered": sfm["registered"],
+               "keyframes": sfm.get("keyframes") or "all",
                "pairs": sfm["pairs_matched"], "reprojection_px": sfm["mean_reprojection_error_px"]}
         row.update(evaluate(dataset, out, os.path.join(out, "sfm", "sparse", "0")))
         rows.append(row)
@@ -107,6 +108,7 @@ def arabidopsis(args):
         sfm = sfm_json(out)
         rows.append({"seed": "arabidopsis", "matcher": "frond" if matcher == "auto" else
                      "colmap exhaustive", "sfm_s": seconds, "registered": sfm["registered"],
+                     "keyframes": sfm.get("keyframes") or "all",
                      "pairs": sfm["pairs_matched"] or 60 * 59 // 2,
                      "reprojection_px": sfm["mean_reprojection_error_px"]})
         print_rows(rows[-1:], header=(len(rows) == 1))
@@ -127,9 +129,13 @@ def scaling(args):
             _, seconds = run([FROND, "sfm", os.path.join(dataset, "images"), "--out", out,
                               "--matcher", matcher, "--no-undistort"])
             sfm = sfm_json(out)
+            text, _ = run([FROND, "eval", "--gt", dataset, "--dense", out, "--json"])
+            alignment = json.loads(text[text.index("{"):])["alignment"]
             rows.append({"seed": f"{views} views", "matcher": "frond" if matcher == "auto"
                          else "colmap exhaustive", "sfm_s": seconds,
                          "registered": sfm["registered"],
+                         "keyframes": sfm.get("keyframes") or "all",
+                         "camera_rms_mm": alignment["rms_camera_residual"] * 1e3,
                          "pairs": sfm["pairs_matched"] or views * (views - 1) // 2,
                          "reprojection_px": sfm["mean_reprojection_error_px"],
                          "timings": sfm["timings"]})
@@ -139,7 +145,8 @@ def scaling(args):
 
 COLUMNS = [("seed", "plant", "{}"), ("matcher", "matcher", "{}"), ("pairs", "pairs", "{}"),
            ("sfm_s", "SfM s", "{:.1f}"), ("photos_to_plant_s", "photos→plant s", "{:.1f}"),
-           ("registered", "registered", "{}"), ("camera_rms_mm", "camera RMS mm", "{:.2f}"),
+           ("registered", "registered", "{}"), ("keyframes", "keyframes", "{}"),
+           ("camera_rms_mm", "camera RMS mm", "{:.2f}"),
            ("reprojection_px", "reproj. px", "{:.3f}"), ("leaf_recall", "leaf recall", "{:.3f}")]
 
 

@@ -686,6 +686,11 @@ struct SfmArgs {
     /// photo.
     #[arg(long, default_value_t = frond::sfm::pairs::PairOptions::default().sequential)]
     sequential: usize,
+    /// With the auto matcher: a photo sharing at least this share of its features with a
+    /// keyframe is registered to the model the keyframes build instead of building it (dense
+    /// captures map in a fraction of the time); 0 maps every photo incrementally.
+    #[arg(long, default_value_t = frond::sfm::keyframes::KeyframeOptions::default().min_overlap)]
+    keyframe_overlap: f64,
 }
 
 impl SfmArgs {
@@ -707,6 +712,9 @@ impl SfmArgs {
                 retrieved: self.retrieved,
                 sequential: self.sequential,
                 ..Default::default()
+            },
+            keyframes: frond::sfm::keyframes::KeyframeOptions {
+                min_overlap: self.keyframe_overlap,
             },
             camera_model: self.camera_model.clone(),
             single_camera: !self.camera_per_photo,

@@ -155,6 +155,33 @@ pub fn verified_pairs(path: &Path) -> Result<(usize, usize), DatabaseError> {
     .map_err(|e| error(path, e))
 }
 
+/// COLMAP's pair id of two image ids (`i < j`): `i · 2147483647 + j`.
+const PAIR_ID_BASE: i64 = 2_147_483_647;
+
+/// Every verified two-view geometry with inliers: `(image_id, image_id, inlier matches)`.
+pub fn verified_inliers(path: &Path) -> Result<Vec<(u32, u32, usize)>, DatabaseError> {
+    let db = open_read_only(path)?;
+    let mut statement = db
+        .prepare("SELECT pair_id, rows FROM two_view_geometries WHERE rows > 0")
+        .map_err(|e| error(path, e))?;
+    let rows = statement
+        .query_map([], |row| Ok((row.get::<_, i64>(0)?, row.get::<_, i64>(1)?)))
+        .map_err(|e| error(path, e))?;
+    let mut pairs = Vec::new();
+    for row in rows {
+        let (pair_id, inliers) = row.map_err(|e| error(path, e))?;
+        let (first, second) = (pair_id / PAIR_ID_BASE, pair_id % PAIR_ID_BASE);
+        let (Ok(first), Ok(second)) = (u32::try_from(first), u32::try_from(second)) else {
+            return Err(error(
+                path,
+                format!("two-view geometry with a bad pair id {pair_id}"),
+            ));
+        };
+        pairs.push((first, second, inliers.max(0) as usize));
+    }
+    Ok(pairs)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -234,5 +261,31 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(missing.contains("none.db"), "{missing}");
+    }
+
+    #[test]
+    fn verified_pairs_are_read_with_their_image_ids() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("database.db");
+        write_test_database(&path, &[("a.png", vec![[1u8; 128]]), ("b.png", vec![])]);
+        let db = rusqlite::Connection::open(&path).unwrap();
+        for (pair_id, rows) in [(PAIR_ID_BASE + 2, 40), (2 * PAIR_ID_BASE + 7, 0), (-5, 3)] {
+            db.execute(
+                "INSERT INTO two_view_geometries VALUES (?1, ?2, 2, NULL)",
+                rusqlite::params![pair_id, rows],
+            )
+            .unwrap();
+        }
+        drop(db);
+        // A pair id no image pair can have is an error naming it.
+        let err = verified_inliers(&path).unwrap_err().to_string();
+        assert!(err.contains("-5"), "{err}");
+        let db = rusqlite::Connection::open(&path).unwrap();
+        db.execute("DELETE FROM two_view_geometries WHERE pair_id < 0", [])
+            .unwrap();
+        drop(db);
+        // Pairs without inliers are not verified.
+        assert_eq!(verified_inliers(&path).unwrap(), vec![(1, 2, 40)]);
+        assert_eq!(verified_pairs(&path).unwrap(), (1, 40));
     }
 }

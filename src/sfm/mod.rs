@@ -27,6 +27,7 @@
 //! a folder of photos and [`SfmOptions`]; returns an [`SfmReport`].
 
 pub mod database;
+pub mod keyframes;
 pub mod matching;
 pub mod pairs;
 pub mod photos;
@@ -43,8 +44,9 @@ use serde::Serialize;
 use crate::scene::{SceneError, read_model};
 use crate::util::atomic::{StagedDir, write_atomic};
 use crate::util::progress::Progress;
+use keyframes::{KeyframeOptions, select_keyframes};
 use matching::{MatchOptions, match_descriptors};
-use pairs::{PairOptions, select_pairs};
+use pairs::{PairOptions, select_pairs, select_pairs_diverse};
 use photos::{PhotoCheck, RejectedPhoto, check_photos};
 
 /// How photos are matched.
@@ -71,6 +73,8 @@ pub struct SfmOptions {
     pub pairs: PairOptions,
     /// What [`Matcher::Auto`] counts as a match.
     pub matching: MatchOptions,
+    /// Which photos [`Matcher::Auto`] builds the model from; the others are registered to it.
+    pub keyframes: KeyframeOptions,
     /// COLMAP camera model name (SIMPLE_RADIAL, OPENCV, …).
     pub camera_model: String,
     /// One camera (lens and focal length) per photo size; `false`: one per photo.
@@ -90,6 +94,7 @@ impl Default for SfmOptions {
             matcher: Matcher::Auto,
             pairs: PairOptions::default(),
             matching: MatchOptions::default(),
+            keyframes: KeyframeOptions::default(),
             camera_model: "SIMPLE_RADIAL".to_owned(),
             single_camera: true,
             undistort: true,
@@ -162,6 +167,9 @@ pub struct SfmReport {
     /// Photos the retrieval pairs left unregistered, matched with every other photo in a
     /// second pass (Frond's matcher).
     pub second_pass_photos: usize,
+    /// Photos the incremental mapper built the model from (Frond's matcher, dense captures;
+    /// the others were registered to it and adjusted with it): 0 when every photo was.
+    pub keyframes: usize,
     pub registered: usize,
     pub unregistered: Vec<String>,
     pub points: usize,
@@ -486,6 +494,7 @@ fn run_steps(
     report.timings.insert("features".into(), seconds);
 
     let mut frond = None;
+    let mut keyframes: Option<Vec<String>> = None;
     // COLMAP's match lists separate the two photo names by a space.
     let spaced = check
         .groups
@@ -510,9 +519,31 @@ fn run_steps(
             pairs.len(),
             usable * usable.saturating_sub(1) / 2
         );
-        frond
-            .insert(matcher)
-            .match_and_verify(&pairs, &database, &log, options, progress, report)?;
+        let matcher = frond.insert(matcher);
+        matcher.match_and_verify(&pairs, &database, &log, options, progress, report)?;
+        check_cancelled(progress)?;
+        // A dense capture: the mapper builds the model from keyframes, matched among
+        // themselves as a sparser capture would be.
+        let chosen = matcher.keyframes(&database, options)?;
+        if chosen.len() < matcher.images.len() {
+            let pairs = matcher.pairs_among(&chosen, options, true);
+            tracing::info!(
+                "{} of {} photos are keyframes; matching {} more pairs among them",
+                chosen.len(),
+                matcher.images.len(),
+                pairs.len()
+            );
+            if !pairs.is_empty() {
+                matcher.match_and_verify(&pairs, &database, &log, options, progress, report)?;
+            }
+            report.keyframes = chosen.len();
+            keyframes = Some(
+                chosen
+                    .iter()
+                    .map(|&i| matcher.images[i].name.clone())
+                    .collect(),
+            );
+        }
     } else {
         colmap_matching(&database, &log, options, progress, report)?;
     }
@@ -520,7 +551,15 @@ fn run_steps(
 
     let mapped = root.join("mapped");
     let mut models = map(
-        photos, &database, &mapped, &log, options, progress, usable, report,
+        photos,
+        &database,
+        &mapped,
+        &log,
+        options,
+        progress,
+        usable,
+        keyframes.as_deref(),
+        report,
     )?;
     let usable_names: Vec<&String> = check.groups.iter().flat_map(|g| &g.photos).collect();
     let unregistered = |models: &[(usize, PathBuf, crate::scene::Reconstruction)]| {
@@ -552,8 +591,23 @@ fn run_steps(
             // (COLMAP's mapper is not deterministic on several threads).
             let first = root.join("mapped_first_pass");
             std::fs::rename(&mapped, &first).map_err(|e| output_error(&first, e))?;
+            // The photos registered only now build the model too.
+            let keyframes = keyframes.as_ref().map(|list| {
+                let mut list = list.clone();
+                list.extend(missing.iter().cloned());
+                list.sort();
+                list
+            });
             let second = map(
-                photos, &database, &mapped, &log, options, progress, usable, report,
+                photos,
+                &database,
+                &mapped,
+                &log,
+                options,
+                progress,
+                usable,
+                keyframes.as_deref(),
+                report,
             )?;
             let registered = |m: &[(usize, PathBuf, crate::scene::Reconstruction)]| {
                 m.first().map_or(0, |(n, _, _)| *n)
@@ -652,7 +706,9 @@ fn run_steps(
 }
 
 /// COLMAP's incremental mapper into `mapped` (emptied first): the models it made, the one
-/// with the most registered images first (none when no pair could start a model).
+/// with the most registered images first (none when no pair could start a model). With
+/// `keyframes`, the mapper builds the models from those photos only; the others are then
+/// registered to the main model (`image_registrator`) and one bundle adjustment refines it.
 #[allow(clippy::too_many_arguments)]
 fn map(
     photos: &Path,
@@ -662,6 +718,7 @@ fn map(
     options: &SfmOptions,
     progress: &dyn Progress,
     usable: usize,
+    keyframes: Option<&[String]>,
     report: &mut SfmReport,
 ) -> Result<Vec<(usize, PathBuf, crate::scene::Reconstruction)>, SfmError> {
     progress.stage("structure from motion: mapping", usable as u64);
@@ -670,7 +727,7 @@ fn map(
     }
     std::fs::create_dir_all(mapped).map_err(|e| output_error(mapped, e))?;
     let s = |v: &str| v.to_owned();
-    let mapper = vec![
+    let mut mapper = vec![
         s("mapper"),
         s("--database_path"),
         path_arg(database),
@@ -681,8 +738,14 @@ fn map(
         s("--Mapper.num_threads"),
         options.threads.max(1).to_string(),
     ];
+    if let Some(list) = keyframes {
+        let path = database.with_file_name("keyframes.txt");
+        write_atomic(&path, (list.join("\n") + "\n").as_bytes())
+            .map_err(|e| output_error(&path, e))?;
+        mapper.extend([s("--image_list_path"), path_arg(&path)]);
+    }
     let mut registered_so_far = 0u64;
-    let mapping = run_colmap(options, "mapping", &mapper, log, &mut |line| {
+    let mut on_line = |line: &str| {
         if line.starts_with("Registering image #")
             && let Some(count) = line
                 .rsplit('(')
@@ -693,7 +756,8 @@ fn map(
             progress.advance(count - registered_so_far);
             registered_so_far = count;
         }
-    });
+    };
+    let mapping = run_colmap(options, "mapping", &mapper, log, &mut on_line);
     match mapping {
         Ok(seconds) => add_timing(report, "mapping", seconds),
         // The mapper gives up when no image pair can start a model.
@@ -714,6 +778,49 @@ fn map(
             }
         }
     }
+    models.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
+    if keyframes.is_none() || models.is_empty() {
+        return Ok(models);
+    }
+    // The photos that are not keyframes join the main model by their poses alone (each from
+    // its 2D–3D matches); one bundle adjustment then refines every pose, point and the
+    // cameras.
+    let main = models[0].1.clone();
+    let registered = mapped.join("registered.tmp");
+    let adjusted = mapped.join("adjusted.tmp");
+    for dir in [&registered, &adjusted] {
+        std::fs::create_dir_all(dir).map_err(|e| output_error(dir, e))?;
+    }
+    let threads = options.threads.max(1).to_string();
+    let register = vec![
+        s("image_registrator"),
+        s("--database_path"),
+        path_arg(database),
+        s("--input_path"),
+        path_arg(&main),
+        s("--output_path"),
+        path_arg(&registered),
+        s("--Mapper.num_threads"),
+        threads.clone(),
+    ];
+    let seconds = run_colmap(options, "registration", &register, log, &mut on_line)?;
+    add_timing(report, "registration", seconds);
+    check_cancelled(progress)?;
+    let adjust = vec![
+        s("bundle_adjuster"),
+        s("--input_path"),
+        path_arg(&registered),
+        s("--output_path"),
+        path_arg(&adjusted),
+    ];
+    let seconds = run_colmap(options, "bundle adjustment", &adjust, log, &mut |_| {})?;
+    add_timing(report, "bundle adjustment", seconds);
+    check_cancelled(progress)?;
+    std::fs::remove_dir_all(&main).map_err(|e| output_error(&main, e))?;
+    std::fs::rename(&adjusted, &main).map_err(|e| output_error(&main, e))?;
+    std::fs::remove_dir_all(&registered).map_err(|e| output_error(&registered, e))?;
+    let (model, _) = read_model(&main)?;
+    models[0] = (model.images().len(), main, model);
     models.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
     Ok(models)
 }
@@ -783,19 +890,59 @@ impl FrondMatcher {
 
     /// The first pass's pairs: preemptive retrieval and file-name neighbours.
     fn retrieval_pairs(&self, options: &SfmOptions) -> Vec<(usize, usize)> {
-        let samples: Vec<matching::Descriptors> = self
+        let all: Vec<usize> = (0..self.images.len()).collect();
+        self.pairs_among(&all, options, false)
+    }
+
+    /// The keyframes among the photos (indices into `images`, ascending), from the verified
+    /// pairs in the database ([`keyframes`]).
+    fn keyframes(&self, database: &Path, options: &SfmOptions) -> Result<Vec<usize>, SfmError> {
+        let index: std::collections::HashMap<u32, usize> = self
             .images
             .iter()
-            .map(|i| {
+            .enumerate()
+            .map(|(k, image)| (image.image_id, k))
+            .collect();
+        let inliers: Vec<(usize, usize, usize)> = database::verified_inliers(database)?
+            .into_iter()
+            .filter_map(|(a, b, count)| Some((*index.get(&a)?, *index.get(&b)?, count)))
+            .collect();
+        let features: Vec<usize> = self.images.iter().map(|i| i.descriptors.len()).collect();
+        Ok(select_keyframes(&features, &inliers, &options.keyframes))
+    }
+
+    /// The pairs the retrieval chooses among `subset` alone (as if it were the capture), with
+    /// relative neighbours when `diverse` ([`select_pairs_diverse`]), less those matched
+    /// already.
+    fn pairs_among(
+        &self,
+        subset: &[usize],
+        options: &SfmOptions,
+        diverse: bool,
+    ) -> Vec<(usize, usize)> {
+        let samples: Vec<matching::Descriptors> = subset
+            .iter()
+            .map(|&k| {
+                let image = &self.images[k];
                 pairs::preemptive_sample(
-                    &i.descriptors,
-                    &i.scales,
+                    &image.descriptors,
+                    &image.scales,
                     options.pairs.preemptive_features,
                 )
             })
             .collect();
-        self.pool
-            .install(|| select_pairs(&samples, &options.pairs, &options.matching))
+        let local = self.pool.install(|| {
+            if diverse {
+                select_pairs_diverse(&samples, &options.pairs, &options.matching)
+            } else {
+                select_pairs(&samples, &options.pairs, &options.matching)
+            }
+        });
+        local
+            .into_iter()
+            .map(|(a, b)| (subset[a], subset[b]))
+            .filter(|pair| !self.matched.contains(pair))
+            .collect()
     }
 
     /// Every pair not matched yet that holds one of `photos`.

@@ -76,6 +76,30 @@ pub fn select_pairs(
     options: &PairOptions,
     matching: &MatchOptions,
 ) -> Vec<(usize, usize)> {
+    choose_pairs(samples, options, matching, false)
+}
+
+/// [`select_pairs`] plus, for every photo, up to [`PairOptions::retrieved`] photos that are
+/// its relative neighbours: candidates are taken most similar first, and one is passed over
+/// when a photo already taken is more similar to it than this photo is (it is reached
+/// through that one). In a dense capture the most similar photos are all one's neighbours
+/// along the same walk, so plain retrieval never reaches a second ring of photos taken from
+/// another height (measured on a 200-photo orbit: 3 of 1,229 verified pairs joined the two
+/// rings, all by file-name order); the relative neighbours step past the walk.
+pub fn select_pairs_diverse(
+    samples: &[Descriptors],
+    options: &PairOptions,
+    matching: &MatchOptions,
+) -> Vec<(usize, usize)> {
+    choose_pairs(samples, options, matching, true)
+}
+
+fn choose_pairs(
+    samples: &[Descriptors],
+    options: &PairOptions,
+    matching: &MatchOptions,
+    diverse: bool,
+) -> Vec<(usize, usize)> {
     let n = samples.len();
     let mut pairs = BTreeSet::new();
     if n <= options.retrieved + 2 * options.sequential + 1 {
@@ -111,6 +135,18 @@ pub fn select_pairs(
         ranked.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
         for &(_, j) in ranked.iter().take(options.retrieved) {
             pairs.insert((i.min(j), i.max(j)));
+        }
+        if diverse {
+            let mut taken: Vec<usize> = Vec::new();
+            for &(s, j) in &ranked {
+                if taken.len() >= options.retrieved {
+                    break;
+                }
+                if taken.iter().all(|&t| score[t][j] <= s) {
+                    taken.push(j);
+                    pairs.insert((i.min(j), i.max(j)));
+                }
+            }
         }
     }
     pairs.into_iter().collect()
@@ -177,6 +213,51 @@ mod tests {
         );
         // Deterministic.
         assert_eq!(pairs, select_pairs(&photos, &options, &matching));
+    }
+
+    /// Two rings of 20 photos: photo k of a ring sees that ring's patterns [2k, 2k + 30), so
+    /// ring neighbours share most of them, and the two photos at position k of the two rings
+    /// share 6 patterns of their own (another height, little in common).
+    fn two_rings(seed: u64) -> Vec<Descriptors> {
+        let mut rng = Rng::seed_from(seed);
+        let mut pattern =
+            || -> [f32; DESCRIPTOR_DIM] { std::array::from_fn(|_| rng.uniform().powi(4) as f32) };
+        let rings: Vec<Vec<[f32; DESCRIPTOR_DIM]>> = (0..2)
+            .map(|_| (0..70).map(|_| pattern()).collect())
+            .collect();
+        let shared: Vec<[f32; DESCRIPTOR_DIM]> = (0..120).map(|_| pattern()).collect();
+        let mut photos = Vec::new();
+        for ring in &rings {
+            for k in 0..20 {
+                let mut rows: Vec<[f32; DESCRIPTOR_DIM]> = ring[2 * k..2 * k + 30].to_vec();
+                rows.extend_from_slice(&shared[6 * k..6 * k + 6]);
+                photos.push(Descriptors::from_rows(&rows));
+            }
+        }
+        photos
+    }
+
+    #[test]
+    fn relative_neighbours_reach_the_other_ring_where_the_most_similar_do_not() {
+        let photos = two_rings(7);
+        let options = PairOptions {
+            sequential: 0,
+            retrieved: 4,
+            ..PairOptions::default()
+        };
+        let matching = MatchOptions::default();
+        let across =
+            |pairs: &[(usize, usize)]| pairs.iter().filter(|&&(i, j)| (i < 20) != (j < 20)).count();
+        let plain = select_pairs(&photos, &options, &matching);
+        assert_eq!(across(&plain), 0, "{plain:?}");
+        let diverse = select_pairs_diverse(&photos, &options, &matching);
+        // Every photo reaches its counterpart in the other ring, and keeps its plain pairs.
+        for k in 0..20 {
+            assert!(diverse.contains(&(k, k + 20)), "{k}: {diverse:?}");
+        }
+        assert!(plain.iter().all(|p| diverse.contains(p)));
+        assert!(diverse.len() < 40 * 39 / 2 / 4, "{} pairs", diverse.len());
+        assert_eq!(diverse, select_pairs_diverse(&photos, &options, &matching));
     }
 
     #[test]
