@@ -10,11 +10,15 @@
 //!    pair than its CPU matcher); COLMAP verifies the matches geometrically
 //!    (`matches_importer`). [`Matcher::Exhaustive`], [`Matcher::Sequential`] and
 //!    [`Matcher::VocabTree`] run COLMAP's own matchers instead.
-//! 4. COLMAP's incremental mapper; optionally its undistortion (Frond's densify reads distorted
-//!    photos directly, so the pipeline skips it).
+//! 4. COLMAP's incremental mapper; in a dense capture from [`keyframes`] only (matched once
+//!    more among themselves, relative neighbours included), the other photos then registered
+//!    to the model (`image_registrator`) and one `bundle_adjuster` run over all; optionally
+//!    its undistortion (Frond's densify reads distorted photos directly, so the pipeline skips
+//!    it).
 //!
 //! Writes one folder:
-//! - `database.db`, `colmap.log` (every COLMAP message), `matches.txt` (Frond's matches);
+//! - `database.db`, `colmap.log` (every COLMAP message), `matches.txt` (Frond's matches),
+//!   `keyframes.txt` (the photos the mapper built the model from, when not all);
 //! - `sparse/0`: the model with the most registered images (COLMAP numbers its models by
 //!   discovery; the best is renamed to 0, the others kept as 1, 2, …);
 //! - `dense/` (with [`SfmOptions::undistort`]): COLMAP's undistorted workspace;
