@@ -143,7 +143,7 @@ fn a_dense_capture_is_mapped_from_keyframes_and_every_photo_is_registered() {
     };
     let report = run_sfm(&dataset.join("images"), &out, &sfm_options, &NoProgress).unwrap();
     eprintln!("{report:?}");
-    // Photos 6° apart share about half their features: about every other one is a keyframe.
+    // Photos 5–6° apart, keyframes 8° or more apart: about every other photo is one.
     assert!(
         report.keyframes >= 20 && report.keyframes <= 90,
         "{report:?}"

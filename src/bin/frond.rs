@@ -686,11 +686,11 @@ struct SfmArgs {
     /// photo.
     #[arg(long, default_value_t = frond::sfm::pairs::PairOptions::default().sequential)]
     sequential: usize,
-    /// With the auto matcher: a photo sharing at least this share of its features with a
-    /// keyframe is registered to the model the keyframes build instead of building it (dense
-    /// captures map in a fraction of the time); 0 maps every photo incrementally.
-    #[arg(long, default_value_t = frond::sfm::keyframes::KeyframeOptions::default().min_overlap)]
-    keyframe_overlap: f64,
+    /// With the auto matcher: a photo whose camera is turned less than this (degrees) from a
+    /// keyframe's is registered to the model the keyframes build instead of building it
+    /// (dense captures map in a fraction of the time); 0 maps every photo incrementally.
+    #[arg(long, default_value_t = frond::sfm::keyframes::KeyframeOptions::default().max_angle_deg)]
+    keyframe_angle: f64,
 }
 
 impl SfmArgs {
@@ -714,7 +714,7 @@ impl SfmArgs {
                 ..Default::default()
             },
             keyframes: frond::sfm::keyframes::KeyframeOptions {
-                min_overlap: self.keyframe_overlap,
+                max_angle_deg: self.keyframe_angle,
             },
             camera_model: self.camera_model.clone(),
             single_camera: !self.camera_per_photo,

@@ -158,18 +158,76 @@ pub fn verified_pairs(path: &Path) -> Result<(usize, usize), DatabaseError> {
 /// COLMAP's pair id of two image ids (`i < j`): `i · 2147483647 + j`.
 const PAIR_ID_BASE: i64 = 2_147_483_647;
 
-/// Every verified two-view geometry with inliers: `(image_id, image_id, inlier matches)`.
-pub fn verified_inliers(path: &Path) -> Result<Vec<(u32, u32, usize)>, DatabaseError> {
+/// A verified two-view geometry.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VerifiedPair {
+    pub image_ids: (u32, u32),
+    pub inliers: usize,
+    /// The angle (degrees) of the rotation between the two cameras, from the pair's essential
+    /// matrix (or its fundamental matrix and the cameras' intrinsics, prior ones included);
+    /// `None` when the pair has neither (a homography-only pair) or its cameras are unknown.
+    pub rotation_deg: Option<f64>,
+}
+
+/// Every verified two-view geometry with inliers, with the rotation between its cameras.
+pub fn verified_geometries(path: &Path) -> Result<Vec<VerifiedPair>, DatabaseError> {
     let db = open_read_only(path)?;
+    // Each image's intrinsic matrix, from its camera.
+    let mut cameras = std::collections::HashMap::new();
+    {
+        let mut statement = db
+            .prepare("SELECT camera_id, model, params FROM cameras")
+            .map_err(|e| error(path, e))?;
+        let rows = statement
+            .query_map([], |row| {
+                Ok((
+                    row.get::<_, i64>(0)?,
+                    row.get::<_, i64>(1)?,
+                    row.get::<_, Option<Vec<u8>>>(2)?,
+                ))
+            })
+            .map_err(|e| error(path, e))?;
+        for row in rows {
+            let (id, model, params) = row.map_err(|e| error(path, e))?;
+            if let Some(k) = intrinsics(model, params.as_deref().unwrap_or_default()) {
+                cameras.insert(id, k);
+            }
+        }
+    }
+    let mut image_cameras = std::collections::HashMap::new();
+    {
+        let mut statement = db
+            .prepare("SELECT image_id, camera_id FROM images")
+            .map_err(|e| error(path, e))?;
+        let rows = statement
+            .query_map([], |row| Ok((row.get::<_, i64>(0)?, row.get::<_, i64>(1)?)))
+            .map_err(|e| error(path, e))?;
+        for row in rows {
+            let (image, camera) = row.map_err(|e| error(path, e))?;
+            image_cameras.insert(image, camera);
+        }
+    }
+    let intrinsic = |image: u32| {
+        image_cameras
+            .get(&i64::from(image))
+            .and_then(|camera| cameras.get(camera))
+    };
     let mut statement = db
-        .prepare("SELECT pair_id, rows FROM two_view_geometries WHERE rows > 0")
+        .prepare("SELECT pair_id, rows, F, E FROM two_view_geometries WHERE rows > 0")
         .map_err(|e| error(path, e))?;
     let rows = statement
-        .query_map([], |row| Ok((row.get::<_, i64>(0)?, row.get::<_, i64>(1)?)))
+        .query_map([], |row| {
+            Ok((
+                row.get::<_, i64>(0)?,
+                row.get::<_, i64>(1)?,
+                row.get::<_, Option<Vec<u8>>>(2)?,
+                row.get::<_, Option<Vec<u8>>>(3)?,
+            ))
+        })
         .map_err(|e| error(path, e))?;
     let mut pairs = Vec::new();
     for row in rows {
-        let (pair_id, inliers) = row.map_err(|e| error(path, e))?;
+        let (pair_id, inliers, fundamental, essential) = row.map_err(|e| error(path, e))?;
         let (first, second) = (pair_id / PAIR_ID_BASE, pair_id % PAIR_ID_BASE);
         let (Ok(first), Ok(second)) = (u32::try_from(first), u32::try_from(second)) else {
             return Err(error(
@@ -177,9 +235,64 @@ pub fn verified_inliers(path: &Path) -> Result<Vec<(u32, u32, usize)>, DatabaseE
                 format!("two-view geometry with a bad pair id {pair_id}"),
             ));
         };
-        pairs.push((first, second, inliers.max(0) as usize));
+        let essential = matrix(essential.as_deref()).or_else(|| {
+            // x₂ᵀ F x₁ = 0 in pixels, so E = K₂ᵀ F K₁.
+            let f = matrix(fundamental.as_deref())?;
+            Some(intrinsic(second)?.transpose() * f * intrinsic(first)?)
+        });
+        pairs.push(VerifiedPair {
+            image_ids: (first, second),
+            inliers: inliers.max(0) as usize,
+            rotation_deg: essential.and_then(|e| rotation_angle_deg(&e)),
+        });
     }
     Ok(pairs)
+}
+
+/// The intrinsic matrix of a COLMAP camera (model id and its parameter blob).
+fn intrinsics(model: i64, params: &[u8]) -> Option<nalgebra::Matrix3<f64>> {
+    let kind = crate::scene::CameraModelKind::from_id(i32::try_from(model).ok()?)?;
+    let values: Vec<f64> = params
+        .chunks_exact(8)
+        .map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]))
+        .collect();
+    let camera = crate::scene::Camera::new(1, kind, 1, 1, values).ok()?;
+    let (fx, fy, cx, cy) = camera.focal_and_principal_point();
+    (fx > 0.0 && fy > 0.0).then(|| nalgebra::Matrix3::new(fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0))
+}
+
+/// A 3×3 matrix from COLMAP's blob (row-major `f64`s); `None` when absent, of the wrong size
+/// or all zero (not estimated).
+fn matrix(blob: Option<&[u8]>) -> Option<nalgebra::Matrix3<f64>> {
+    let blob = blob?;
+    if blob.len() != 72 {
+        return None;
+    }
+    let values: Vec<f64> = blob
+        .chunks_exact(8)
+        .map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]))
+        .collect();
+    let m = nalgebra::Matrix3::from_row_slice(&values);
+    (m.iter().all(|v| v.is_finite()) && m.iter().any(|v| *v != 0.0)).then_some(m)
+}
+
+/// The rotation angle (degrees) of an essential matrix's decomposition: of its two rotations
+/// (R = U W Vᵀ and U Wᵀ Vᵀ), the smaller angle. The other is the "twisted pair" solution, a
+/// half turn about the baseline away; for photos of one object a few degrees apart it is the
+/// far one.
+pub fn rotation_angle_deg(essential: &nalgebra::Matrix3<f64>) -> Option<f64> {
+    let svd = essential.svd(true, true);
+    let (mut u, mut v_t) = (svd.u?, svd.v_t?);
+    if u.determinant() < 0.0 {
+        u = -u;
+    }
+    if v_t.determinant() < 0.0 {
+        v_t = -v_t;
+    }
+    let w = nalgebra::Matrix3::new(0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0);
+    let angle = |r: nalgebra::Matrix3<f64>| ((r.trace() - 1.0) / 2.0).clamp(-1.0, 1.0).acos();
+    let smaller = angle(u * w * v_t).min(angle(u * w.transpose() * v_t));
+    smaller.is_finite().then(|| smaller.to_degrees())
 }
 
 #[cfg(test)]
@@ -193,7 +306,8 @@ mod tests {
             "CREATE TABLE images (image_id INTEGER PRIMARY KEY, name TEXT NOT NULL UNIQUE, camera_id INTEGER NOT NULL);
              CREATE TABLE descriptors (image_id INTEGER PRIMARY KEY NOT NULL, rows INTEGER NOT NULL, cols INTEGER NOT NULL, data BLOB);
              CREATE TABLE keypoints (image_id INTEGER PRIMARY KEY NOT NULL, rows INTEGER NOT NULL, cols INTEGER NOT NULL, data BLOB);
-             CREATE TABLE two_view_geometries (pair_id INTEGER PRIMARY KEY NOT NULL, rows INTEGER NOT NULL, cols INTEGER NOT NULL, data BLOB);",
+             CREATE TABLE two_view_geometries (pair_id INTEGER PRIMARY KEY NOT NULL, rows INTEGER NOT NULL, cols INTEGER NOT NULL, data BLOB, config INTEGER NOT NULL DEFAULT 3, F BLOB, E BLOB, H BLOB);
+             CREATE TABLE cameras (camera_id INTEGER PRIMARY KEY NOT NULL, model INTEGER NOT NULL, width INTEGER NOT NULL, height INTEGER NOT NULL, params BLOB, prior_focal_length INTEGER NOT NULL);",
         )
         .unwrap();
         for (k, (name, rows)) in images.iter().enumerate() {
@@ -271,21 +385,82 @@ mod tests {
         let db = rusqlite::Connection::open(&path).unwrap();
         for (pair_id, rows) in [(PAIR_ID_BASE + 2, 40), (2 * PAIR_ID_BASE + 7, 0), (-5, 3)] {
             db.execute(
-                "INSERT INTO two_view_geometries VALUES (?1, ?2, 2, NULL)",
+                "INSERT INTO two_view_geometries (pair_id, rows, cols) VALUES (?1, ?2, 2)",
                 rusqlite::params![pair_id, rows],
             )
             .unwrap();
         }
         drop(db);
         // A pair id no image pair can have is an error naming it.
-        let err = verified_inliers(&path).unwrap_err().to_string();
+        let err = verified_geometries(&path).unwrap_err().to_string();
         assert!(err.contains("-5"), "{err}");
         let db = rusqlite::Connection::open(&path).unwrap();
         db.execute("DELETE FROM two_view_geometries WHERE pair_id < 0", [])
             .unwrap();
         drop(db);
         // Pairs without inliers are not verified.
-        assert_eq!(verified_inliers(&path).unwrap(), vec![(1, 2, 40)]);
+        let pairs = verified_geometries(&path).unwrap();
+        assert_eq!(pairs.len(), 1);
+        assert_eq!((pairs[0].image_ids, pairs[0].inliers), ((1, 2), 40));
+        // No matrices were stored: no rotation.
+        assert_eq!(pairs[0].rotation_deg, None);
         assert_eq!(verified_pairs(&path).unwrap(), (1, 40));
+    }
+
+    /// The essential matrix [t]ₓ R of a camera pair whose rotation turns `degrees` about an
+    /// oblique axis, the second camera moved sideways as on an orbit.
+    fn essential(degrees: f64) -> nalgebra::Matrix3<f64> {
+        let axis = nalgebra::Unit::new_normalize(nalgebra::Vector3::new(0.2, 1.0, 0.1));
+        let r = nalgebra::Rotation3::from_axis_angle(&axis, degrees.to_radians());
+        let t = nalgebra::Vector3::new(0.3, 0.02, 0.05);
+        t.cross_matrix() * r.matrix()
+    }
+
+    #[test]
+    fn the_rotation_of_an_essential_matrix_is_recovered() {
+        for degrees in [0.5, 3.6, 8.0, 20.0, 45.0] {
+            let found = rotation_angle_deg(&essential(degrees)).unwrap();
+            assert!((found - degrees).abs() < 1e-6, "{degrees}° → {found}°");
+            // Scale and sign of E do not matter.
+            let scaled = rotation_angle_deg(&(-3.0 * essential(degrees))).unwrap();
+            assert!((scaled - degrees).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn pairs_get_their_rotation_from_the_fundamental_matrix_and_the_camera() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("database.db");
+        write_test_database(&path, &[("a.png", vec![[1u8; 128]]), ("b.png", vec![])]);
+        // A SIMPLE_RADIAL camera (f, cx, cy, k) shared by both images.
+        let (f, cx, cy) = (960.0, 400.0, 300.0);
+        let params: Vec<u8> = [f, cx, cy, 0.01]
+            .iter()
+            .flat_map(|v: &f64| v.to_le_bytes())
+            .collect();
+        let db = rusqlite::Connection::open(&path).unwrap();
+        db.execute(
+            "INSERT INTO cameras VALUES (1, 2, 800, 600, ?1, 0)",
+            rusqlite::params![params],
+        )
+        .unwrap();
+        let k = nalgebra::Matrix3::new(f, 0.0, cx, 0.0, f, cy, 0.0, 0.0, 1.0);
+        let k_inv = k.try_inverse().unwrap();
+        let fundamental = k_inv.transpose() * essential(6.0) * k_inv * 1e3;
+        let blob: Vec<u8> = fundamental
+            .transpose()
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        db.execute(
+            "INSERT INTO two_view_geometries (pair_id, rows, cols, F) VALUES (?1, 120, 2, ?2)",
+            rusqlite::params![PAIR_ID_BASE + 2, blob],
+        )
+        .unwrap();
+        drop(db);
+        let pairs = verified_geometries(&path).unwrap();
+        assert_eq!(pairs.len(), 1);
+        let degrees = pairs[0].rotation_deg.unwrap();
+        assert!((degrees - 6.0).abs() < 1e-6, "{degrees}");
     }
 }

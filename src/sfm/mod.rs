@@ -907,12 +907,24 @@ impl FrondMatcher {
             .enumerate()
             .map(|(k, image)| (image.image_id, k))
             .collect();
-        let inliers: Vec<(usize, usize, usize)> = database::verified_inliers(database)?
-            .into_iter()
-            .filter_map(|(a, b, count)| Some((*index.get(&a)?, *index.get(&b)?, count)))
-            .collect();
-        let features: Vec<usize> = self.images.iter().map(|i| i.descriptors.len()).collect();
-        Ok(select_keyframes(&features, &inliers, &options.keyframes))
+        let pairs: Vec<(usize, usize, usize, Option<f64>)> =
+            database::verified_geometries(database)?
+                .into_iter()
+                .filter_map(|pair| {
+                    let (a, b) = pair.image_ids;
+                    Some((
+                        *index.get(&a)?,
+                        *index.get(&b)?,
+                        pair.inliers,
+                        pair.rotation_deg,
+                    ))
+                })
+                .collect();
+        Ok(select_keyframes(
+            self.images.len(),
+            &pairs,
+            &options.keyframes,
+        ))
     }
 
     /// The pairs the retrieval chooses among `subset` alone (as if it were the capture), with
