@@ -173,10 +173,13 @@ pub struct VerifiedPair {
 pub fn verified_geometries(path: &Path) -> Result<Vec<VerifiedPair>, DatabaseError> {
     let db = open_read_only(path)?;
     // Each image's intrinsic matrix, from its camera.
-    let mut cameras = std::collections::HashMap::new();
+    let mut intrinsics_of = std::collections::HashMap::new();
     {
         let mut statement = db
-            .prepare("SELECT camera_id, model, params FROM cameras")
+            .prepare(
+                "SELECT images.image_id, cameras.model, cameras.params \
+                 FROM images JOIN cameras ON images.camera_id = cameras.camera_id",
+            )
             .map_err(|e| error(path, e))?;
         let rows = statement
             .query_map([], |row| {
@@ -188,30 +191,13 @@ pub fn verified_geometries(path: &Path) -> Result<Vec<VerifiedPair>, DatabaseErr
             })
             .map_err(|e| error(path, e))?;
         for row in rows {
-            let (id, model, params) = row.map_err(|e| error(path, e))?;
+            let (image, model, params) = row.map_err(|e| error(path, e))?;
             if let Some(k) = intrinsics(model, params.as_deref().unwrap_or_default()) {
-                cameras.insert(id, k);
+                intrinsics_of.insert(image, k);
             }
         }
     }
-    let mut image_cameras = std::collections::HashMap::new();
-    {
-        let mut statement = db
-            .prepare("SELECT image_id, camera_id FROM images")
-            .map_err(|e| error(path, e))?;
-        let rows = statement
-            .query_map([], |row| Ok((row.get::<_, i64>(0)?, row.get::<_, i64>(1)?)))
-            .map_err(|e| error(path, e))?;
-        for row in rows {
-            let (image, camera) = row.map_err(|e| error(path, e))?;
-            image_cameras.insert(image, camera);
-        }
-    }
-    let intrinsic = |image: u32| {
-        image_cameras
-            .get(&i64::from(image))
-            .and_then(|camera| cameras.get(camera))
-    };
+    let intrinsic = |image: u32| intrinsics_of.get(&i64::from(image));
     let mut statement = db
         .prepare("SELECT pair_id, rows, F, E FROM two_view_geometries WHERE rows > 0")
         .map_err(|e| error(path, e))?;
@@ -252,13 +238,16 @@ pub fn verified_geometries(path: &Path) -> Result<Vec<VerifiedPair>, DatabaseErr
 /// The intrinsic matrix of a COLMAP camera (model id and its parameter blob).
 fn intrinsics(model: i64, params: &[u8]) -> Option<nalgebra::Matrix3<f64>> {
     let kind = crate::scene::CameraModelKind::from_id(i32::try_from(model).ok()?)?;
-    let values: Vec<f64> = params
-        .chunks_exact(8)
-        .map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]))
-        .collect();
-    let camera = crate::scene::Camera::new(1, kind, 1, 1, values).ok()?;
+    let camera = crate::scene::Camera::new(1, kind, 1, 1, f64_values(params)).ok()?;
     let (fx, fy, cx, cy) = camera.focal_and_principal_point();
     (fx > 0.0 && fy > 0.0).then(|| nalgebra::Matrix3::new(fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0))
+}
+
+/// The little-endian `f64`s of a blob (a trailing partial value is ignored).
+fn f64_values(blob: &[u8]) -> Vec<f64> {
+    blob.chunks_exact(8)
+        .map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]))
+        .collect()
 }
 
 /// A 3×3 matrix from COLMAP's blob (row-major `f64`s); `None` when absent, of the wrong size
@@ -268,11 +257,7 @@ fn matrix(blob: Option<&[u8]>) -> Option<nalgebra::Matrix3<f64>> {
     if blob.len() != 72 {
         return None;
     }
-    let values: Vec<f64> = blob
-        .chunks_exact(8)
-        .map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]))
-        .collect();
-    let m = nalgebra::Matrix3::from_row_slice(&values);
+    let m = nalgebra::Matrix3::from_row_slice(&f64_values(blob));
     (m.iter().all(|v| v.is_finite()) && m.iter().any(|v| *v != 0.0)).then_some(m)
 }
 
