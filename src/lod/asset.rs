@@ -63,7 +63,16 @@ pub fn upload_textures(
         .enumerate()
         .map(|(i, image)| {
             let users = || parts.iter().filter(|p| p.texture == i);
-            if users().any(|p| p.shading().alpha_coverage) {
+            let coverage = users().any(|p| p.shading().alpha_coverage);
+            // Baked atlases (billboards) are read beyond their quads' uvs (back tiles, view
+            // rows); other coverage textures are read only inside their meshes.
+            let baked =
+                users().any(|p| p.shading.views.is_some() || p.shading.back_uv_offset != 0.0);
+            if coverage && !baked {
+                let footprint =
+                    uv_footprint(image.width(), image.height(), users().map(|p| &p.mesh));
+                renderer.add_coverage_texture_on(gpu, image, &footprint)
+            } else if coverage {
                 renderer.add_coverage_texture(gpu, image)
             } else if users().any(|p| p.shading.unlit) {
                 renderer.add_baked_cutout_texture(gpu, image)
@@ -74,6 +83,50 @@ pub fn upload_textures(
             }
         })
         .collect()
+}
+
+/// The texels (row-major, `width` × `height`) whose centre lies in the uv image of a triangle
+/// of `meshes` (uv (0, 0) at the image's top-left corner): where the meshes read a texture.
+pub fn uv_footprint<'a>(
+    width: u32,
+    height: u32,
+    meshes: impl Iterator<Item = &'a crate::mesh::TriMesh>,
+) -> Vec<bool> {
+    let mut inside = vec![false; (width * height) as usize];
+    let (w, h) = (width as f32, height as f32);
+    for mesh in meshes {
+        for tri in &mesh.triangles {
+            let Some(corners) = tri
+                .iter()
+                .map(|&i| mesh.uvs.get(i as usize).map(|uv| [uv[0] * w, uv[1] * h]))
+                .collect::<Option<Vec<[f32; 2]>>>()
+            else {
+                continue;
+            };
+            let [a, b, c] = [corners[0], corners[1], corners[2]];
+            let area = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+            if area.abs() < 1e-12 {
+                continue;
+            }
+            let lo = |k: usize| a[k].min(b[k]).min(c[k]).floor().max(0.0) as u32;
+            let hi = |k: usize, n: u32| (a[k].max(b[k]).max(c[k]).ceil().max(0.0) as u32).min(n);
+            let edge = |p: [f32; 2], q: [f32; 2], x: f32, y: f32| {
+                ((q[0] - p[0]) * (y - p[1]) - (q[1] - p[1]) * (x - p[0])) / area
+            };
+            for y in lo(1)..hi(1, height) {
+                for x in lo(0)..hi(0, width) {
+                    let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
+                    if edge(a, b, px, py) >= -1e-6
+                        && edge(b, c, px, py) >= -1e-6
+                        && edge(c, a, px, py) >= -1e-6
+                    {
+                        inside[(y * width + x) as usize] = true;
+                    }
+                }
+            }
+        }
+    }
+    inside
 }
 
 impl AssetPart {
@@ -309,6 +362,30 @@ fn tint(image: &RgbaImage, color: [f32; 4]) -> RgbaImage {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_uv_footprint_holds_the_texels_whose_centres_a_triangle_covers() {
+        // The lower-left half of a 4×4 page (the diagonal through texel centres counts).
+        let mut mesh = crate::mesh::TriMesh {
+            positions: vec![nalgebra::Point3::origin(); 3],
+            normals: vec![nalgebra::Vector3::z(); 3],
+            uvs: vec![[0.0, 0.0], [1.0, 1.0], [0.0, 1.0]],
+            triangles: vec![[0, 1, 2]],
+        };
+        let inside = uv_footprint(4, 4, std::iter::once(&mesh));
+        for y in 0..4 {
+            for x in 0..4 {
+                assert_eq!(inside[y * 4 + x], x <= y, "texel {x},{y}");
+            }
+        }
+        // Either winding; uvs beyond the page are clipped.
+        mesh.uvs = vec![[-1.0, -1.0], [2.0, -1.0], [-1.0, 2.0]];
+        mesh.triangles = vec![[0, 2, 1]];
+        assert_eq!(
+            uv_footprint(4, 4, std::iter::once(&mesh)),
+            (0..16).map(|i| i % 4 + i / 4 <= 3).collect::<Vec<_>>()
+        );
+    }
     use crate::synth::{Preset, generate_plant};
 
     #[test]

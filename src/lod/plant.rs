@@ -648,10 +648,12 @@ mod tests {
 
     #[test]
     fn foliage_seen_small_keeps_its_light() {
-        // A low broadleaf plant whose leaves are seen nearly edge-on from 15° up: drawn with
-        // all-or-nothing alpha it kept 59 % of its light (per unit of plant area) at 55 px
-        // against 436 px; with alpha as coverage and the mip of the footprint's shorter side,
-        // 87 %.
+        // A low broadleaf plant whose leaves are seen nearly edge-on from 15° up (four
+        // directions): light per unit of plant area at 55 px against 436 px. Drawn with
+        // all-or-nothing alpha it kept 59 %; with alpha as coverage and the mip of the
+        // footprint's shorter side 87 %; with attributes at the centroid of the covered
+        // samples and coverage mips on the leaves' uv footprint it keeps its light (1744 px
+        // gives the same as 436 px within 1 %; at 55 px single views scatter by ±5 %).
         let mut renderer = Renderer::new().unwrap();
         let asset =
             PlantAsset::from_model(&plant_model(&generate_plant(Preset::Broadleaf, 21), 64));
@@ -685,18 +687,22 @@ mod tests {
             // The plant spans a quarter of the window; light per unit of plant area.
             let distance = 30.0 * radius as f64;
             let focal = side as f64 * distance / (8.0 * radius as f64);
-            let camera = view_of(
-                &centre.cast::<f64>(),
-                distance,
-                0.3,
-                15f64.to_radians(),
-                side,
-                focal,
-            );
-            let out = renderer
-                .render(&gpu, &camera, &crate::render::Lighting::default())
-                .unwrap();
-            light_and_coverage(&out).unwrap().0 / (side as f64).powi(2)
+            let mut light = 0.0;
+            for azimuth in [0.3, 1.3, 2.3, 3.3] {
+                let camera = view_of(
+                    &centre.cast::<f64>(),
+                    distance,
+                    azimuth,
+                    15f64.to_radians(),
+                    side,
+                    focal,
+                );
+                let out = renderer
+                    .render(&gpu, &camera, &crate::render::Lighting::default())
+                    .unwrap();
+                light += light_and_coverage(&out).unwrap().0 / (side as f64).powi(2);
+            }
+            light
         };
         let kept = |coverage: bool, light: &mut dyn FnMut(bool, u32) -> f64| {
             light(coverage, 55) / light(coverage, 436)
@@ -705,7 +711,7 @@ mod tests {
         let without = kept(false, &mut light);
         eprintln!("light kept at 55 px: {with:.2} with coverage, {without:.2} without");
         assert!(
-            with > 0.7 && with > without + 0.1,
+            (0.93..1.07).contains(&with) && with > without + 0.2,
             "{with} against {without}"
         );
     }

@@ -158,6 +158,133 @@ fn mip_chain_linear(image: &RgbaImage) -> Vec<RgbaImage> {
     })
 }
 
+/// Per-texel sums carried down a conditioned mip chain (means over the level-0 texels under a
+/// texel): the footprint share `m`, alpha on the footprint `am`, alpha everywhere `a`, and
+/// linear colour weighted by each.
+#[derive(Clone, Copy, Default)]
+struct CoverageMoments {
+    m: f32,
+    am: f32,
+    cam: [f32; 3],
+    a: f32,
+    ca: [f32; 3],
+    c: [f32; 3],
+}
+
+/// Mip levels of a coverage texture drawn on meshes that follow its outline (leaves): a coarse
+/// texel's alpha is the share covered *of the part of it the meshes cover* (`footprint`, one
+/// flag per level-0 texel), not of the whole texel. A plain average also counts the
+/// transparent texels outside the mesh's outline, which the mesh's own edge already leaves out:
+/// a leaf seen small lost its edges twice (a low broadleaf plant at 55 px, 4 % of its light).
+/// Texels off the footprint take their neighbours' values, so that bilinear filtering at a
+/// mesh's edge reads no outside alpha. Colour is averaged in linear light weighted by alpha.
+/// Level 0 is the image itself.
+fn mip_chain_on_footprint(image: &RgbaImage, footprint: &[bool]) -> Vec<RgbaImage> {
+    use crate::util::color::{linear_to_srgb, srgb_to_linear};
+    let decode: Vec<f32> = (0..=255u8).map(|v| srgb_to_linear(v) as f32).collect();
+    let (mut w, mut h) = image.dimensions();
+    let mut moments: Vec<CoverageMoments> = image
+        .pixels()
+        .enumerate()
+        .map(|(i, px)| {
+            let a = px[3] as f32 / 255.0;
+            let m = if footprint.get(i).copied().unwrap_or(false) {
+                1.0
+            } else {
+                0.0
+            };
+            let c = [0, 1, 2].map(|k| decode[px[k] as usize]);
+            CoverageMoments {
+                m,
+                am: a * m,
+                cam: c.map(|v| v * a * m),
+                a,
+                ca: c.map(|v| v * a),
+                c,
+            }
+        })
+        .collect();
+    let mut levels = vec![image.clone()];
+    while w > 1 || h > 1 {
+        let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
+        let mut next = vec![CoverageMoments::default(); (nw * nh) as usize];
+        for y in 0..nh {
+            for x in 0..nw {
+                let t = &mut next[(y * nw + x) as usize];
+                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                    let (sx, sy) = ((2 * x + dx).min(w - 1), (2 * y + dy).min(h - 1));
+                    let s = moments[(sy * w + sx) as usize];
+                    t.m += 0.25 * s.m;
+                    t.am += 0.25 * s.am;
+                    t.a += 0.25 * s.a;
+                    for k in 0..3 {
+                        t.cam[k] += 0.25 * s.cam[k];
+                        t.ca[k] += 0.25 * s.ca[k];
+                        t.c[k] += 0.25 * s.c[k];
+                    }
+                }
+            }
+        }
+        let texel = |t: &CoverageMoments| -> Option<(f32, [f32; 3])> {
+            (t.m > 1e-6).then(|| {
+                let colour = if t.am > 1e-6 {
+                    t.cam.map(|v| v / t.am)
+                } else {
+                    t.c
+                };
+                (t.am / t.m, colour)
+            })
+        };
+        let level = RgbaImage::from_fn(nw, nh, |x, y| {
+            let own = &next[(y * nw + x) as usize];
+            let (alpha, colour) = texel(own).unwrap_or_else(|| {
+                // Off the footprint: the mean of the neighbours on it, else the plain average.
+                let (mut n, mut alpha, mut colour) = (0.0f32, 0.0f32, [0.0f32; 3]);
+                for (dx, dy) in [
+                    (-1, -1),
+                    (0, -1),
+                    (1, -1),
+                    (-1, 0),
+                    (1, 0),
+                    (-1, 1),
+                    (0, 1),
+                    (1, 1),
+                ] {
+                    let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                    if nx < 0 || ny < 0 || nx >= nw as i64 || ny >= nh as i64 {
+                        continue;
+                    }
+                    if let Some((a, c)) = texel(&next[(ny as u32 * nw + nx as u32) as usize]) {
+                        n += 1.0;
+                        alpha += a;
+                        for k in 0..3 {
+                            colour[k] += c[k];
+                        }
+                    }
+                }
+                if n > 0.0 {
+                    (alpha / n, colour.map(|v| v / n))
+                } else if own.a > 1e-6 {
+                    (own.a, own.ca.map(|v| v / own.a))
+                } else {
+                    (own.a, own.c)
+                }
+            });
+            let encode = |v: f32| linear_to_srgb(v as f64);
+            image::Rgba([
+                encode(colour[0]),
+                encode(colour[1]),
+                encode(colour[2]),
+                (alpha.clamp(0.0, 1.0) * 255.0).round() as u8,
+            ])
+        });
+        levels.push(level);
+        moments = next;
+        (w, h) = (nw, nh);
+    }
+    levels
+}
+
 /// Bytes per instance transform.
 pub(super) const INSTANCE_BYTES: u64 = 64;
 
@@ -244,6 +371,19 @@ impl Renderer {
     /// cut-off).
     pub fn add_coverage_texture(&self, scene: &mut GpuScene, image: &RgbaImage) -> TextureHandle {
         self.upload_texture(scene, mip_chain_linear(image))
+    }
+
+    /// Uploads a coverage texture ([`Renderer::add_coverage_texture`]) drawn on meshes that
+    /// follow its outline, such as leaves: `footprint` flags the level-0 texels the meshes
+    /// cover (row-major), and a coarse level's alpha is the share covered of that footprint,
+    /// so that a mesh's edge and the texture's edge are not both counted.
+    pub fn add_coverage_texture_on(
+        &self,
+        scene: &mut GpuScene,
+        image: &RgbaImage,
+        footprint: &[bool],
+    ) -> TextureHandle {
+        self.upload_texture(scene, mip_chain_on_footprint(image, footprint))
     }
 
     fn upload_texture(&self, scene: &mut GpuScene, levels: Vec<RgbaImage>) -> TextureHandle {
@@ -573,6 +713,48 @@ mod tests {
         for level in solid.iter_mut().skip(1) {
             preserve_alpha_coverage(level, 1.0);
             assert!(level.pixels().all(|p| p[3] >= 128));
+        }
+    }
+
+    #[test]
+    fn coverage_mips_on_a_footprint_count_only_the_meshes_texels() {
+        // An opaque disc on a transparent page, drawn on a mesh that follows its outline.
+        let inside = |x: u32, y: u32| {
+            let (dx, dy) = (x as f32 + 0.5 - 32.0, y as f32 + 0.5 - 32.0);
+            dx * dx + dy * dy < 20.0 * 20.0
+        };
+        let page = RgbaImage::from_fn(64, 64, |x, y| {
+            image::Rgba([40, 160, 40, if inside(x, y) { 255 } else { 0 }])
+        });
+        let disc: Vec<bool> = (0..64 * 64).map(|i| inside(i % 64, i / 64)).collect();
+        let plain = mip_chain_linear(&page);
+        let on_disc = mip_chain_on_footprint(&page, &disc);
+        assert_eq!(plain.len(), on_disc.len());
+        assert_eq!(on_disc[0], page);
+        // At 8×8 texels per texel the disc's edge texels are partly transparent on average,
+        // but wholly opaque where the mesh is; every texel near the disc reads opaque.
+        let (p3, d3) = (&plain[3], &on_disc[3]);
+        let edge = (0..64u32)
+            .map(|i| (i % 8, i / 8))
+            .filter(|&(x, y)| (1..255).contains(&p3.get_pixel(x, y)[3]))
+            .count();
+        assert!(edge >= 8, "{edge} edge texels");
+        for y in 0..8 {
+            for x in 0..8 {
+                let (cx, cy) = (x as f32 * 8.0 + 4.0 - 32.0, y as f32 * 8.0 + 4.0 - 32.0);
+                if (cx * cx + cy * cy).sqrt() < 20.0 + 8.0 {
+                    assert_eq!(d3.get_pixel(x, y)[3], 255, "texel {x},{y}");
+                }
+                // The colour is the disc's, never darkened by the transparent texels.
+                assert!(d3.get_pixel(x, y)[1] >= 158, "texel {x},{y}");
+            }
+        }
+        // Over a footprint that covers the whole page alpha is the plain average.
+        let all = vec![true; 64 * 64];
+        for (a, b) in mip_chain_on_footprint(&page, &all).iter().zip(&plain) {
+            for (p, q) in a.pixels().zip(b.pixels()) {
+                assert!((p[3] as i32 - q[3] as i32).abs() <= 1, "{p:?} {q:?}");
+            }
         }
     }
 }
