@@ -183,27 +183,30 @@ fn mip_chain_on_footprint(image: &RgbaImage, footprint: &[bool]) -> Vec<RgbaImag
     use crate::util::color::{linear_to_srgb, srgb_to_linear};
     let decode: Vec<f32> = (0..=255u8).map(|v| srgb_to_linear(v) as f32).collect();
     let (mut w, mut h) = image.dimensions();
-    let mut moments: Vec<CoverageMoments> = image
-        .pixels()
-        .enumerate()
-        .map(|(i, px)| {
-            let a = px[3] as f32 / 255.0;
-            let m = if footprint.get(i).copied().unwrap_or(false) {
-                1.0
-            } else {
-                0.0
-            };
-            let c = [0, 1, 2].map(|k| decode[px[k] as usize]);
-            CoverageMoments {
-                m,
-                am: a * m,
-                cam: c.map(|v| v * a * m),
-                a,
-                ca: c.map(|v| v * a),
-                c,
-            }
-        })
-        .collect();
+    // Level 0's moments are read from the image as needed (a 2048² page would take 190 MB).
+    let level0 = |x: u32, y: u32| {
+        let px = image.get_pixel(x, y);
+        let a = px[3] as f32 / 255.0;
+        let m = if footprint
+            .get((y * image.width() + x) as usize)
+            .copied()
+            .unwrap_or(false)
+        {
+            1.0
+        } else {
+            0.0
+        };
+        let c = [0, 1, 2].map(|k| decode[px[k] as usize]);
+        CoverageMoments {
+            m,
+            am: a * m,
+            cam: c.map(|v| v * a * m),
+            a,
+            ca: c.map(|v| v * a),
+            c,
+        }
+    };
+    let mut moments: Vec<CoverageMoments> = Vec::new();
     let mut levels = vec![image.clone()];
     while w > 1 || h > 1 {
         let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
@@ -213,7 +216,11 @@ fn mip_chain_on_footprint(image: &RgbaImage, footprint: &[bool]) -> Vec<RgbaImag
                 let t = &mut next[(y * nw + x) as usize];
                 for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
                     let (sx, sy) = ((2 * x + dx).min(w - 1), (2 * y + dy).min(h - 1));
-                    let s = moments[(sy * w + sx) as usize];
+                    let s = if moments.is_empty() {
+                        level0(sx, sy)
+                    } else {
+                        moments[(sy * w + sx) as usize]
+                    };
                     t.m += 0.25 * s.m;
                     t.am += 0.25 * s.am;
                     t.a += 0.25 * s.a;
