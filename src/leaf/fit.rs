@@ -70,6 +70,8 @@ pub enum FitError {
     TooFewPoints(usize),
     #[error("the points are collinear or coincident: no leaf plane")]
     Degenerate,
+    #[error("no generic leaf to fit")]
+    NoGenericLeaf,
 }
 
 /// The leaf's frame: origin at the points' centroid, x from base to tip, z the normal.
@@ -809,7 +811,7 @@ pub fn fit_leaf_best_outline(
     options: &LeafFitOptions,
 ) -> Result<FittedLeaf, FitError> {
     let Some((first, others)) = templates.split_first() else {
-        return Err(FitError::Degenerate);
+        return Err(FitError::NoGenericLeaf);
     };
     let mut fitted = fit_leaf(points, first, plant, boundary, options)?;
     for (k, template) in others.iter().enumerate() {
@@ -1035,7 +1037,7 @@ mod tests {
         assert!(!blind.notes.iter().any(|n| n.contains("alternative")));
         assert!(matches!(
             fit_leaf_best_outline(&points, &[], &plant(), None, &options),
-            Err(FitError::Degenerate)
+            Err(FitError::NoGenericLeaf)
         ));
     }
 
