@@ -8,17 +8,12 @@
 //! (default: broadleaf 4, 7, 11, 21, 31 and medium 3, 12, 22, 32).
 
 use anyhow::{Context, Result, bail};
-use frond::lod::asset::{AssetPart, PlantAsset, upload_textures};
+use frond::lod::asset::PlantAsset;
 use frond::lod::billboard::BillboardOptions;
 use frond::lod::chain::ChainOptions;
-use frond::lod::plant::{
-    PlantLod, PlantLodOptions, REFERENCE_VIEWPORT, build_plant_lod, summarize_switch,
-};
-use frond::lod::select::switch_distance;
-use frond::render::{Lighting, Renderer, ViewCamera};
-use frond::scene::synthetic::look_at;
+use frond::lod::plant::{PlantLod, PlantLodOptions, build_plant_lod, summarize_switch};
+use frond::render::Renderer;
 use frond::synth::{Preset, generate_plant, plant_model};
-use nalgebra::Vector3;
 
 fn main() -> Result<()> {
     let mut plants: Vec<(Preset, u64)> = Vec::new();
@@ -98,78 +93,25 @@ fn main() -> Result<()> {
     Ok(())
 }
 
-/// Summed linear luminance of an sRGB image.
-fn light(image: &image::RgbaImage) -> f64 {
-    let decode = frond::util::color::srgb_to_linear;
-    image
-        .pixels()
-        .map(|p| 0.2126 * decode(p[0]) + 0.7152 * decode(p[1]) + 0.0722 * decode(p[2]))
-        .sum()
-}
-
 /// Per elevation (5°, 30°, 60°; 8 directions each), the full plant's and the billboard's light
-/// at the billboard's switch distance against the full plant rendered 8× larger (per unit of
-/// image area), in percent.
+/// at the billboard's switch distance against the full plant rendered 8× larger, in percent.
 fn against_supersampled(lod: &PlantLod, renderer: &mut Renderer) -> Result<Vec<(f64, f64, f64)>> {
-    let billboard = lod
-        .levels
-        .iter()
-        .position(|l| l.is_billboard)
+    let elevations = [5.0, 30.0, 60.0];
+    let checks = lod
+        .switch_against_supersampled(renderer, 4.0, 8, &elevations, 8)?
         .context("no billboard level")?;
-    let distance = switch_distance(lod.levels[billboard].error_world, &REFERENCE_VIEWPORT, 4.0)
-        .max(4.0 * lod.radius as f64);
-    let mut scenes = Vec::new();
-    for level in [0, billboard] {
-        let mut gpu = renderer.new_scene();
-        let parts: Vec<&AssetPart> = lod.levels[level].parts.iter().collect();
-        let textures = upload_textures(renderer, &mut gpu, &lod.textures, &parts);
-        for part in &lod.levels[level].parts {
-            let texture = *textures.get(part.texture).context("part without texture")?;
-            let handle = renderer.add_mesh(&mut gpu, &part.mesh, texture, 1, part.alpha_test)?;
-            renderer.set_shading(&gpu, handle, part.shading())?;
-        }
-        scenes.push(gpu);
-    }
-    let focal = REFERENCE_VIEWPORT.height_px / (2.0 * (0.5 * REFERENCE_VIEWPORT.fov_y_rad).tan());
-    let centre = lod.center.cast::<f64>();
-    let side = ((4.0 * lod.radius as f64 * focal / distance).ceil() as u32).clamp(16, 512);
-    let scale = 8u32;
-    let mut out = Vec::new();
-    for elevation_deg in [5.0f64, 30.0, 60.0] {
-        let (mut full, mut star, mut truth) = (0.0, 0.0, 0.0);
-        for k in 0..8 {
-            let azimuth = std::f64::consts::TAU * k as f64 / 8.0;
-            let elevation = elevation_deg.to_radians();
-            let eye = centre
-                + Vector3::new(
-                    azimuth.cos() * elevation.cos(),
-                    azimuth.sin() * elevation.cos(),
-                    elevation.sin(),
-                ) * distance;
-            let camera = |side: u32, focal: f64| ViewCamera {
-                width: side,
-                height: side,
-                fx: focal,
-                fy: focal,
-                cx: 0.5 * side as f64,
-                cy: 0.5 * side as f64,
-                camera_from_world: look_at(eye, centre),
-                near: 0.5 * distance,
-                far: 2.0 * distance,
-            };
-            let lighting = Lighting::default();
-            let small = camera(side, focal);
-            let large = camera(side * scale, focal * scale as f64);
-            full += light(&renderer.render(&scenes[0], &small, &lighting)?.color);
-            star += light(&renderer.render(&scenes[1], &small, &lighting)?.color);
-            truth += light(&renderer.render(&scenes[0], &large, &lighting)?.color)
-                / (scale * scale) as f64;
-        }
-        out.push((
-            elevation_deg,
-            100.0 * (full / truth - 1.0),
-            100.0 * (star / truth - 1.0),
-        ));
-    }
-    Ok(out)
+    Ok(elevations
+        .iter()
+        .map(|&elevation| {
+            let at = checks.iter().filter(|c| c.elevation_deg == elevation);
+            let (truth, full, billboard) = at.fold((0.0, 0.0, 0.0), |(t, f, b), c| {
+                (t + c.truth, f + c.full, b + c.billboard)
+            });
+            (
+                elevation,
+                100.0 * (full / truth - 1.0),
+                100.0 * (billboard / truth - 1.0),
+            )
+        })
+        .collect())
 }

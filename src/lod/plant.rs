@@ -538,6 +538,78 @@ impl PlantLod {
         azimuths: usize,
         elevations_deg: &[f64],
     ) -> Result<Option<Vec<SwitchLuminance>>, RenderError> {
+        let Some(setup) = self.switch_setup(renderer, threshold_px)? else {
+            return Ok(None);
+        };
+        let mut out = Vec::with_capacity(azimuths * elevations_deg.len());
+        let lighting = crate::render::Lighting::default();
+        for (azimuth, elevation_deg) in directions(azimuths, elevations_deg) {
+            let camera = setup.view(azimuth, elevation_deg, 1);
+            let full =
+                light_and_coverage(&renderer.render(&setup.scenes[0], &camera, &lighting)?);
+            let star =
+                light_and_coverage(&renderer.render(&setup.scenes[1], &camera, &lighting)?);
+            if let (Some((full, full_pixels)), Some((billboard, billboard_pixels))) = (full, star) {
+                out.push(SwitchLuminance {
+                    azimuth_deg: azimuth.to_degrees(),
+                    elevation_deg,
+                    full,
+                    billboard,
+                    difference_percent: 100.0 * (billboard - full) / full.max(1e-12),
+                    coverage_ratio: billboard_pixels as f64 / full_pixels as f64,
+                });
+            }
+        }
+        Ok(Some(out))
+    }
+
+    /// The full plant and its billboard, each drawn at the billboard's switch distance as in
+    /// [`PlantLod::switch_luminance`], against the full plant rendered `scale`× larger and
+    /// averaged down in linear light (the plant as a well-filtered image shows it): which of
+    /// the two is wrong where they differ. `None` without a billboard level.
+    pub fn switch_against_supersampled(
+        &self,
+        renderer: &mut Renderer,
+        threshold_px: f64,
+        azimuths: usize,
+        elevations_deg: &[f64],
+        scale: u32,
+    ) -> Result<Option<Vec<SupersampledSwitch>>, RenderError> {
+        let Some(setup) = self.switch_setup(renderer, threshold_px)? else {
+            return Ok(None);
+        };
+        let scale = scale.max(1);
+        let lighting = crate::render::Lighting::default();
+        let mut light = |scene: usize, camera: &crate::render::ViewCamera| {
+            renderer
+                .render(&setup.scenes[scene], camera, &lighting)
+                .map(|out| light_and_coverage(&out).map_or(0.0, |(light, _)| light))
+        };
+        let mut out = Vec::with_capacity(azimuths * elevations_deg.len());
+        for (azimuth, elevation_deg) in directions(azimuths, elevations_deg) {
+            let small = setup.view(azimuth, elevation_deg, 1);
+            let truth =
+                light(0, &setup.view(azimuth, elevation_deg, scale))? / f64::from(scale * scale);
+            let full = light(0, &small)?;
+            let billboard = light(1, &small)?;
+            out.push(SupersampledSwitch {
+                azimuth_deg: azimuth.to_degrees(),
+                elevation_deg,
+                truth,
+                full,
+                billboard,
+            });
+        }
+        Ok(Some(out))
+    }
+
+    /// The two levels a switch check compares (full detail, billboard) on the GPU, with the
+    /// view they are seen in; `None` without a billboard level.
+    fn switch_setup(
+        &self,
+        renderer: &mut Renderer,
+        threshold_px: f64,
+    ) -> Result<Option<SwitchSetup>, RenderError> {
         let Some(billboard) = self.levels.iter().position(|l| l.is_billboard) else {
             return Ok(None);
         };
@@ -565,40 +637,59 @@ impl PlantLod {
         }
         let focal =
             REFERENCE_VIEWPORT.height_px / (2.0 * (0.5 * REFERENCE_VIEWPORT.fov_y_rad).tan());
-        let centre = self.center.cast::<f64>();
         // A window around the plant at the reference viewport's scale.
         let side = ((4.0 * self.radius as f64 * focal / distance).ceil() as u32).clamp(16, 1024);
-        let mut out = Vec::with_capacity(azimuths * elevations_deg.len());
-        for &elevation_deg in elevations_deg {
-            for k in 0..azimuths.max(1) {
-                let azimuth = std::f64::consts::TAU * k as f64 / azimuths.max(1) as f64;
-                let camera = view_of(
-                    &centre,
-                    distance,
-                    azimuth,
-                    elevation_deg.to_radians(),
-                    side,
-                    focal,
-                );
-                let lighting = crate::render::Lighting::default();
-                let full = light_and_coverage(&renderer.render(&scenes[0], &camera, &lighting)?);
-                let star = light_and_coverage(&renderer.render(&scenes[1], &camera, &lighting)?);
-                if let (Some((full, full_pixels)), Some((billboard, billboard_pixels))) =
-                    (full, star)
-                {
-                    out.push(SwitchLuminance {
-                        azimuth_deg: azimuth.to_degrees(),
-                        elevation_deg,
-                        full,
-                        billboard,
-                        difference_percent: 100.0 * (billboard - full) / full.max(1e-12),
-                        coverage_ratio: billboard_pixels as f64 / full_pixels as f64,
-                    });
-                }
-            }
-        }
-        Ok(Some(out))
+        Ok(Some(SwitchSetup {
+            scenes,
+            centre: self.center.cast::<f64>(),
+            distance,
+            side,
+            focal,
+        }))
     }
+}
+
+/// What [`PlantLod::switch_setup`] gives.
+struct SwitchSetup {
+    scenes: Vec<crate::render::GpuScene>,
+    centre: Point3<f64>,
+    distance: f64,
+    side: u32,
+    focal: f64,
+}
+
+impl SwitchSetup {
+    /// The view from `azimuth` (radians) and `elevation_deg`, `scale`× the window's pixels.
+    fn view(&self, azimuth: f64, elevation_deg: f64, scale: u32) -> crate::render::ViewCamera {
+        view_of(
+            &self.centre,
+            self.distance,
+            azimuth,
+            elevation_deg.to_radians(),
+            self.side * scale,
+            self.focal * f64::from(scale),
+        )
+    }
+}
+
+/// Each elevation (degrees) with `azimuths` evenly spaced azimuths (radians).
+fn directions(azimuths: usize, elevations_deg: &[f64]) -> Vec<(f64, f64)> {
+    let n = azimuths.max(1);
+    elevations_deg
+        .iter()
+        .flat_map(|&e| (0..n).map(move |k| (std::f64::consts::TAU * k as f64 / n as f64, e)))
+        .collect()
+}
+
+/// The light the full plant and its billboard send to the eye at the switch distance, and the
+/// light of the full plant rendered larger and averaged down (per window of the switch size).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SupersampledSwitch {
+    pub azimuth_deg: f64,
+    pub elevation_deg: f64,
+    pub truth: f64,
+    pub full: f64,
+    pub billboard: f64,
 }
 
 #[cfg(test)]
