@@ -4,7 +4,9 @@ use nalgebra::Point3;
 
 use std::collections::BTreeSet;
 
-use super::{GtLeafRecord, SkeletonLengthScores, SkeletonRecord, SkeletonScores};
+use super::{
+    GtLeafRecord, PredictedBranchScore, SkeletonLengthScores, SkeletonRecord, SkeletonScores,
+};
 use crate::branch::spline::point_segment_distance;
 use crate::mesh::{TriMesh, point_triangle_distance};
 use crate::util::rng::Rng;
@@ -140,17 +142,28 @@ pub fn skeleton_length_scores(
         })
         .collect();
     let (mut on, mut predicted_length) = (0.0, 0.0);
+    let mut per_branch = Vec::with_capacity(predicted.len());
     for branch in predicted {
+        let (mut branch_on, mut branch_length) = (0.0, 0.0);
         for (p, length) in pieces(&branch.centerline, STEP) {
-            predicted_length += length;
+            branch_length += length;
             let near = true_lines.iter().any(|(line, limit)| {
                 line.windows(2)
                     .any(|w| point_segment_distance(&p, &w[0], &w[1]) <= *limit)
             });
             if near {
-                on += length;
+                branch_on += length;
             }
         }
+        predicted_length += branch_length;
+        on += branch_on;
+        per_branch.push(PredictedBranchScore {
+            id: branch.id,
+            parent: branch.parent,
+            length: branch_length,
+            on_plant_length: branch_on,
+            bridged_length: branch.bridged_length,
+        });
     }
     let share = |a: f64, b: f64| if b > 0.0 { a / b } else { 0.0 };
     SkeletonLengthScores {
@@ -160,6 +173,7 @@ pub fn skeleton_length_scores(
         branch_recall: share(found[0], total[0]),
         petiole_recall: share(found[1], total[1]),
         precision: share(on, predicted_length),
+        predicted_branches: per_branch,
     }
 }
 
@@ -399,5 +413,26 @@ mod tests {
             (scores.precision - expected).abs() < 0.01,
             "{scores:?} vs {expected}"
         );
+        // Each predicted branch's share: the stem lies on the plant, the rim nowhere near it.
+        let by_id = |id: u32| {
+            scores
+                .predicted_branches
+                .iter()
+                .find(|b| b.id == id)
+                .unwrap_or_else(|| panic!("branch {id} missing: {scores:?}"))
+        };
+        let (stem_score, rim_score) = (by_id(0), by_id(9));
+        assert!((stem_score.length - 0.3).abs() < 1e-6, "{stem_score:?}");
+        assert!(
+            (stem_score.on_plant_length - 0.3).abs() < 1e-6,
+            "{stem_score:?}"
+        );
+        assert!(
+            (rim_score.length - rim_length).abs() < 1e-6,
+            "{rim_score:?}"
+        );
+        assert_eq!(rim_score.on_plant_length, 0.0, "{rim_score:?}");
+        let total: f64 = scores.predicted_branches.iter().map(|b| b.length).sum();
+        assert!((total - scores.predicted_length).abs() < 1e-9);
     }
 }

@@ -247,6 +247,13 @@ impl Prediction {
                 }
                 branch.radius_start *= similarity.scale;
                 branch.radius_end *= similarity.scale;
+                branch.length *= similarity.scale;
+                for length in [&mut branch.observed_length, &mut branch.bridged_length]
+                    .into_iter()
+                    .flatten()
+                {
+                    *length *= similarity.scale;
+                }
             }
         }
     }
@@ -348,6 +355,22 @@ pub struct SkeletonLengthScores {
     pub petiole_recall: f64,
     /// Share of the predicted length within tolerance of some true branch or petiole.
     pub precision: f64,
+    /// Each predicted branch's part of `predicted_length`: which of them lie off the plant.
+    pub predicted_branches: Vec<PredictedBranchScore>,
+}
+
+/// One predicted branch's share of [`SkeletonLengthScores::precision`].
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct PredictedBranchScore {
+    pub id: u32,
+    pub parent: Option<u32>,
+    /// Centreline length, model units of the truth.
+    pub length: f64,
+    /// The part of `length` within tolerance of some true branch or petiole.
+    pub on_plant_length: f64,
+    /// The part of the branch drawn where no point is, as the skeleton recorded it (after
+    /// alignment to the truth's units; absent where the skeleton did not record it).
+    pub bridged_length: Option<f64>,
 }
 
 /// The evaluation report.
@@ -669,6 +692,44 @@ impl EvalReport {
                 k.length.precision,
                 k.length.predicted_length
             );
+            // Where the precision goes: the branches with the most length off the plant.
+            let mut off: Vec<&PredictedBranchScore> = k
+                .length
+                .predicted_branches
+                .iter()
+                .filter(|b| b.length - b.on_plant_length > 0.0)
+                .collect();
+            off.sort_by(|a, b| {
+                (b.length - b.on_plant_length).total_cmp(&(a.length - a.on_plant_length))
+            });
+            if !off.is_empty() {
+                let listed: Vec<String> = off
+                    .iter()
+                    .take(5)
+                    .map(|b| {
+                        let bridged = b
+                            .bridged_length
+                            .map(|l| format!(", {:.0} bridged", 1e3 * l))
+                            .unwrap_or_default();
+                        format!(
+                            "branch {} {:.0} of {:.0} mm{bridged}",
+                            b.id,
+                            1e3 * (b.length - b.on_plant_length),
+                            1e3 * b.length
+                        )
+                    })
+                    .collect();
+                let _ = writeln!(
+                    s,
+                    "off the plant:     {}{}",
+                    listed.join("; "),
+                    if off.len() > 5 {
+                        format!(" (and {} more)", off.len() - 5)
+                    } else {
+                        String::new()
+                    }
+                );
+            }
         }
         if let Some(c) = &self.compound {
             let _ = writeln!(
