@@ -519,6 +519,11 @@ fn connected_skeleton(
     })
 }
 
+/// A group of points is round enough for a piece of tube when its third principal spread is
+/// at least this share of its second (`Shape::flatness`): a half-visible ring gives about
+/// 0.44, a leaf fragment about 0.1.
+const TUBE_ROUNDNESS: f64 = 0.3;
+
 /// Pieces of tube the kNN graph could not join to the tree (a petiole seen only near its
 /// leaf, a branch behind foliage) each get their own level-set skeleton, rooted at their end
 /// nearest the plant's base, whose main branch is then extended straight back to the tree:
@@ -527,7 +532,12 @@ fn connected_skeleton(
 /// chord over its first four level widths), among points within 40° of that direction and
 /// within three times the piece's main-branch length. Pieces are taken largest
 /// first, so later ones may attach to earlier ones; a piece shorter than the shortest kept
-/// branch or with no such point is left out. Returns how many pieces were added.
+/// branch or with no such point is left out. So is a flat piece (less round than
+/// [`TUBE_ROUNDNESS`]) whose bridge would be longer than its main branch: stereo smears a
+/// petiole into a flat band too, but then beside the tree, while a band of leaf edge or halo
+/// hangs off the foliage, far from every axis (from photos of broadleaf seeds 1–3, such
+/// pieces were 9 % on the plant, their bridges included). Returns how many pieces were
+/// added.
 fn bridge_pieces(
     branches: &mut Vec<Branch>,
     points: &[Point3<f64>],
@@ -593,6 +603,11 @@ fn bridge_pieces(
         let Some((_, parent, fraction, anchor)) = best else {
             continue;
         };
+        if (anchor - origin).norm() > length
+            && Shape::of(piece_points.iter().copied()).flatness() < TUBE_ROUNDNESS
+        {
+            continue;
+        }
         let mut control = vec![anchor];
         control.extend(main_axis.control_points().iter().copied());
         let Some(skeleton) = spline_through(&control) else {
@@ -645,14 +660,13 @@ struct TubeContext<'a> {
 /// grouped by the kNN graph. A group shaped like a piece of tube becomes a branch: as long
 /// as the shortest kept branch, its spread across its principal axis no more than the
 /// branches' median radius, and round rather than flat (the third principal spread at least
-/// 0.3 of the second: a half-visible ring gives about 0.44, a leaf fragment about 0.1). The
+/// [`TUBE_ROUNDNESS`] of the second). The
 /// branch is the group's centroids along that axis (one per level width), extended from the
 /// end nearer the root (in geodesic distance) straight back, at most twice the group's length,
 /// to an axis it meets within 3 of its radii, crossing it at 5° or more, the axis nearest the
 /// tree's root first; it is kept only where the points support the extension (as in
 /// [`reanchor_base`]). Returns how many branches were added.
 fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> usize {
-    const ROUND: f64 = 0.3;
     let TubeContext {
         points,
         edges,
@@ -748,7 +762,7 @@ fn recover_missed_tubes(branches: &mut Vec<Branch>, context: &TubeContext) -> us
                 (l.min(a), h.max(a))
             });
         let length = high - low;
-        if length < min_length || across > tube_spread || shape.flatness() < ROUND {
+        if length < min_length || across > tube_spread || shape.flatness() < TUBE_ROUNDNESS {
             continue;
         }
         // Centroids per level width along the axis, from the end nearer the root.
@@ -1724,6 +1738,36 @@ mod tests {
         // Nothing is drawn along the stray piece.
         let stray_coverage = best_coverage(&tree, &stray, 0.01);
         assert!(stray_coverage < 0.2, "stray coverage {stray_coverage}");
+    }
+
+    #[test]
+    fn a_flat_band_far_from_the_tree_is_not_bridged() {
+        let mut rng = Rng::seed_from(12);
+        let stem = [Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, 0.3)];
+        let mut points = tube(&stem, 0.004, 10_000.0, &mut rng);
+        // A petiole seen only in its outer 40 %: a round piece whose bridge (0.15 m) is longer
+        // than itself (0.1 m), drawn because it is a tube.
+        let base = Point3::new(0.0, 0.0, 0.2);
+        let tip = Point3::new(0.2, 0.0, 0.35);
+        let seen_from = base + (tip - base) * 0.6;
+        points.extend(tube(&[seen_from, tip], 0.002, 5_000.0, &mut rng));
+        // On the other side, a band 8 mm wide and 0.1 m long with no thickness to speak of
+        // (a leaf's edge, stereo's halo beside a leaf), pointing at the stem from 0.15 m away.
+        let (from, to) = (Point3::new(-0.12, 0.0, 0.29), Point3::new(-0.2, 0.0, 0.35));
+        let across = Vector3::y();
+        for _ in 0..500 {
+            let s = rng.uniform();
+            let w = rng.range(-0.004, 0.004);
+            let thickness = rng.range(-0.0002, 0.0002);
+            let normal = (to - from).normalize().cross(&across);
+            points.push(from + (to - from) * s + across * w + normal * thickness);
+        }
+        let (tree, stats) = skeleton_z_up(&points);
+        assert_eq!(stats.pieces_bridged, 1, "{stats:?}");
+        let petiole = best_coverage(&tree, &[base, tip], 0.01);
+        assert!(petiole > 0.9, "petiole coverage {petiole}");
+        let band = best_coverage(&tree, &[from, to], 0.01);
+        assert!(band < 0.2, "band coverage {band}");
     }
 
     #[test]
