@@ -69,6 +69,9 @@ pub struct SkeletonStats {
     pub bases_reanchored: usize,
     /// Branches found in points no other branch explains ([`recover_missed_tubes`]).
     pub branches_recovered: usize,
+    /// Main axes split at the top of a stem, where it thins abruptly at a fork ([`stem_top`]).
+    #[serde(default)]
+    pub stems_ended: usize,
     /// Pieces of tube out of the kNN graph's reach, bridged to the tree ([`bridge_pieces`]).
     #[serde(default)]
     pub pieces_bridged: usize,
@@ -397,6 +400,8 @@ fn connected_skeleton(
         return Err(SkeletonError::TooFewPoints(n));
     };
     let mut branches: Vec<Branch> = Vec::new();
+    // The main axis's chain and polyline, and where along them its stem ends.
+    let mut stem_split: Option<(Vec<usize>, Vec<Point3<f64>>, usize)> = None;
     // (first node, parent branch id, attachment node)
     let mut queue: Vec<(usize, Option<u32>, Option<usize>)> = vec![(root_node, None, None)];
     let min_length = options.min_branch_levels * level_width;
@@ -482,6 +487,12 @@ fn connected_skeleton(
             continue;
         };
         let id = branch.id;
+        if parent.is_none()
+            && role == Role::Plant
+            && let Some(fork) = stem_top(&chain, &nodes, points)
+        {
+            stem_split = Some((chain.clone(), polyline.clone(), fork));
+        }
         branches.push(branch);
         // Side branches start at each chain node's other children, base first.
         // (A re-anchored base's dropped nodes still pass their other children on.)
@@ -498,6 +509,11 @@ fn connected_skeleton(
                 queue.push((c, Some(id), Some(v)));
             }
         }
+    }
+    if let Some((chain, polyline, fork)) = stem_split
+        && split_stem(&mut branches, &chain, &polyline, fork, &nodes, points)
+    {
+        stats.stems_ended += 1;
     }
     stats.branches_recovered = recover_missed_tubes(
         &mut branches,
@@ -1021,6 +1037,118 @@ struct Anchor {
     point: Point3<f64>,
 }
 
+/// Where a main axis stops being the stem: the first fork (a node with two or more children)
+/// past the chain's fourth node after which the tube is clearly thinner, so that a stem under
+/// a crown of petioles (a rosette, the generator's broadleaf plants: a 6 cm stem of radius
+/// 14 mm under 13–30 cm petioles) is measured as the stem, and the petiole the longest path
+/// runs on into is a branch of its own. Radii are each node's median distance from the chain's
+/// local axis; at the fork, the median over the next four nodes is less than half of both
+/// the chain's median up to the fork and the median of the last four nodes up to it (a
+/// gradual taper does not end a stem), and none of the next eight reaches the chain's median
+/// (sparse points split a ring into arcs that read thin for a level or two). Returns the
+/// fork's position in `chain`.
+fn stem_top(chain: &[usize], nodes: &[Node], points: &[Point3<f64>]) -> Option<usize> {
+    const STEM_NODES: usize = 4;
+    const AHEAD: usize = 4;
+    const CONFIRM: usize = 8;
+    const RATIO: f64 = 0.5;
+    if chain.len() < STEM_NODES + AHEAD {
+        return None;
+    }
+    let centroids: Vec<Point3<f64>> = chain.iter().map(|&v| nodes[v].centroid).collect();
+    let radii: Vec<f64> = (0..chain.len())
+        .map(|k| {
+            let before = centroids[k.saturating_sub(1)];
+            let after = centroids[(k + 1).min(chain.len() - 1)];
+            let Some(tangent) = (after - before).try_normalize(1e-12) else {
+                return 0.0;
+            };
+            crate::util::stats::median(nodes[chain[k]].points.iter().map(|&p| {
+                let d = points[p] - centroids[k];
+                (d - tangent * tangent.dot(&d)).norm()
+            }))
+            .unwrap_or(0.0)
+        })
+        .collect();
+    let median = |range: &[f64]| crate::util::stats::median(range.iter().copied());
+    let thinning = (STEM_NODES - 1..chain.len() - AHEAD).find(|&k| {
+        if nodes[chain[k]].children.len() < 2 {
+            return false;
+        }
+        let (Some(behind), Some(local), Some(ahead)) = (
+            median(&radii[..=k]),
+            median(&radii[k + 1 - STEM_NODES..=k]),
+            median(&radii[k + 1..k + 1 + AHEAD]),
+        ) else {
+            return false;
+        };
+        let confirm = &radii[k + 1..(k + 1 + CONFIRM).min(chain.len())];
+        ahead < RATIO * behind.min(local) && confirm.iter().all(|&r| r < behind)
+    });
+    thinning
+}
+
+/// Splits the main axis (branch 0, built from `chain` through `polyline`) at the top of its
+/// stem, the chain's node `fork` ([`stem_top`]): the stem ends there and the rest of the axis
+/// becomes a branch of its own from the stem's tip, with the same nodes. Side branches keep
+/// their geometry and move to whichever part they leave from. Returns whether it split.
+fn split_stem(
+    branches: &mut Vec<Branch>,
+    chain: &[usize],
+    polyline: &[Point3<f64>],
+    fork: usize,
+    nodes: &[Node],
+    points: &[Point3<f64>],
+) -> bool {
+    let Some(offset) = polyline.len().checked_sub(chain.len()) else {
+        return false;
+    };
+    let cut = fork + offset;
+    if branches.is_empty() || cut < 1 || cut + 2 > polyline.len() || fork + 2 > chain.len() {
+        return false;
+    }
+    let split_fraction = attachment_fraction(&branches[0], &polyline[cut]);
+    let continuation_id = branches.len() as u32;
+    let (Some(stem), Some(continuation)) = (
+        branch_from_chain(
+            0,
+            None,
+            None,
+            &polyline[..=cut],
+            &chain[..=fork],
+            nodes,
+            points,
+        ),
+        branch_from_chain(
+            continuation_id,
+            Some(0),
+            Some(1.0),
+            &polyline[cut..],
+            &chain[fork..],
+            nodes,
+            points,
+        ),
+    ) else {
+        return false;
+    };
+    for branch in branches.iter_mut().filter(|b| b.parent == Some(0)) {
+        let start = branch.cylinder.skeleton.point_at_fraction(0.0);
+        if branch.parent_fraction > split_fraction {
+            branch.parent = Some(continuation_id);
+            branch.parent_fraction = attachment_fraction(&continuation, &start);
+        } else {
+            branch.parent_fraction = attachment_fraction(&stem, &start);
+        }
+    }
+    let leaf_at_tip = branches[0].leaf_at_tip;
+    branches[0] = stem;
+    branches.push(Branch {
+        leaf_at_tip,
+        ..continuation
+    });
+    true
+}
+
 /// RMS distance of a node's points from its centroid.
 fn spread(node: &Node, points: &[Point3<f64>]) -> f64 {
     let sum: f64 = node
@@ -1490,6 +1618,24 @@ mod tests {
                 best_coverage(tree, &outside, tolerance)
             })
             .collect()
+    }
+
+    #[test]
+    fn a_thick_knot_on_a_thin_stem_does_not_end_it() {
+        // A 3 mm stem, 0.3 m tall, with a 12 mm knot around it at 5-8 cm (a rosette's base,
+        // a smeared bud) and a side branch leaving just above the knot: the chain below the
+        // fork is mostly thin, so the stem goes on through it.
+        let mut rng = Rng::seed_from(8);
+        let stem = [Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, 0.3)];
+        let knot = [Point3::new(0.0, 0.0, 0.05), Point3::new(0.0, 0.0, 0.08)];
+        let side = [Point3::new(0.0, 0.0, 0.082), Point3::new(0.12, 0.0, 0.17)];
+        let mut points = tube(&stem, 0.003, 6000.0, &mut rng);
+        points.extend(tube(&knot, 0.012, 60_000.0, &mut rng));
+        points.extend(tube(&side, 0.003, 6000.0, &mut rng));
+        let (tree, stats) = skeleton_z_up(&points);
+        assert_eq!(stats.stems_ended, 0, "{stats:?}");
+        let top = tree.branches[0].cylinder.skeleton.point_at_fraction(1.0);
+        assert!(top.z > 0.27, "the stem stopped at {top}: {stats:?}");
     }
 
     #[test]
