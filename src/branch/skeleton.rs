@@ -1071,7 +1071,7 @@ fn stem_top(chain: &[usize], nodes: &[Node], points: &[Point3<f64>]) -> Option<u
         })
         .collect();
     let median = |range: &[f64]| crate::util::stats::median(range.iter().copied());
-    let thinning = (STEM_NODES - 1..chain.len() - AHEAD).find(|&k| {
+    (STEM_NODES - 1..chain.len() - AHEAD).find(|&k| {
         if nodes[chain[k]].children.len() < 2 {
             return false;
         }
@@ -1084,8 +1084,7 @@ fn stem_top(chain: &[usize], nodes: &[Node], points: &[Point3<f64>]) -> Option<u
         };
         let confirm = &radii[k + 1..(k + 1 + CONFIRM).min(chain.len())];
         ahead < RATIO * behind.min(local) && confirm.iter().all(|&r| r < behind)
-    });
-    thinning
+    })
 }
 
 /// Splits the main axis (branch 0, built from `chain` through `polyline`) at the top of its
