@@ -1055,21 +1055,7 @@ fn stem_top(chain: &[usize], nodes: &[Node], points: &[Point3<f64>]) -> Option<u
     if chain.len() < STEM_NODES + AHEAD {
         return None;
     }
-    let centroids: Vec<Point3<f64>> = chain.iter().map(|&v| nodes[v].centroid).collect();
-    let radii: Vec<f64> = (0..chain.len())
-        .map(|k| {
-            let before = centroids[k.saturating_sub(1)];
-            let after = centroids[(k + 1).min(chain.len() - 1)];
-            let Some(tangent) = (after - before).try_normalize(1e-12) else {
-                return 0.0;
-            };
-            crate::util::stats::median(nodes[chain[k]].points.iter().map(|&p| {
-                let d = points[p] - centroids[k];
-                (d - tangent * tangent.dot(&d)).norm()
-            }))
-            .unwrap_or(0.0)
-        })
-        .collect();
+    let radii = chain_radii(chain, nodes, points);
     let median = |range: &[f64]| crate::util::stats::median(range.iter().copied());
     (STEM_NODES - 1..chain.len() - AHEAD).find(|&k| {
         if nodes[chain[k]].children.len() < 2 {
@@ -1087,10 +1073,33 @@ fn stem_top(chain: &[usize], nodes: &[Node], points: &[Point3<f64>]) -> Option<u
     })
 }
 
+/// Each chain node's median distance from the chain's local axis (through its neighbours'
+/// centroids): about the radius of the tube the node is a slice of.
+fn chain_radii(chain: &[usize], nodes: &[Node], points: &[Point3<f64>]) -> Vec<f64> {
+    let centroids: Vec<Point3<f64>> = chain.iter().map(|&v| nodes[v].centroid).collect();
+    (0..chain.len())
+        .map(|k| {
+            let before = centroids[k.saturating_sub(1)];
+            let after = centroids[(k + 1).min(chain.len() - 1)];
+            let Some(tangent) = (after - before).try_normalize(1e-12) else {
+                return 0.0;
+            };
+            crate::util::stats::median(nodes[chain[k]].points.iter().map(|&p| {
+                let d = points[p] - centroids[k];
+                (d - tangent * tangent.dot(&d)).norm()
+            }))
+            .unwrap_or(0.0)
+        })
+        .collect()
+}
+
 /// Splits the main axis (branch 0, built from `chain` through `polyline`) at the top of its
 /// stem, the chain's node `fork` ([`stem_top`]): the stem ends there and the rest of the axis
 /// becomes a branch of its own from the stem's tip, with the same nodes. Side branches keep
-/// their geometry and move to whichever part they leave from. Returns whether it split.
+/// their geometry and move to whichever part they leave from. The stem gets one radius, the
+/// median of its levels' ([`chain_radii`]): its first levels are arcs of its ring, too thin,
+/// and its last the crown's knot, too wide (a linear fit went from 8 to 30 mm on a 14 mm
+/// stem). Returns whether it split.
 fn split_stem(
     branches: &mut Vec<Branch>,
     chain: &[usize],
@@ -1108,7 +1117,7 @@ fn split_stem(
     }
     let split_fraction = attachment_fraction(&branches[0], &polyline[cut]);
     let continuation_id = branches.len() as u32;
-    let (Some(stem), Some(continuation)) = (
+    let (Some(mut stem), Some(continuation)) = (
         branch_from_chain(
             0,
             None,
@@ -1130,6 +1139,11 @@ fn split_stem(
     ) else {
         return false;
     };
+    if let Some(radius) = crate::util::stats::median(chain_radii(&chain[..=fork], nodes, points))
+        && radius > 0.0
+    {
+        stem.cylinder = GeneralizedCylinder::new(stem.cylinder.skeleton.clone(), radius, radius);
+    }
     for branch in branches.iter_mut().filter(|b| b.parent == Some(0)) {
         let start = branch.cylinder.skeleton.point_at_fraction(0.0);
         if branch.parent_fraction > split_fraction {

@@ -13,6 +13,7 @@ use egui::{Event, Key, Modifiers, PointerButton, Pos2};
 use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
 use frond::edit::{Project, Session};
+use frond::render::ViewCamera;
 use frond::segment::SegmentLabel;
 use frond_ui::FrondApp;
 use frond_ui::files::ConfigDir;
@@ -453,14 +454,8 @@ fn branch_tools_edit_the_branch_tree_with_undo() {
     assert!(session(&harness).branches().get(drawn.id).is_some());
 }
 
-#[test]
-fn branches_are_drawn_and_moved_in_the_3d_view() {
-    let config = tempfile::tempdir().unwrap();
-    let mut harness = harness_with(dataset().to_path_buf(), config.path());
-    harness.state_mut().layout = frond_ui::CentralLayout::ThreeD;
-    harness.run_steps(3);
-    let before = session(&harness).branches().branches.len();
-    let stem = session(&harness).branches().branches[0].clone();
+/// The 3D view's camera as the app draws it now, its rectangle and points per pixel.
+fn view_camera(harness: &Harness<'static, FrondApp>) -> (ViewCamera, egui::Rect, f32) {
     let app = harness.state();
     let orbit = app.view3d.orbit.expect("the 3D view framed the plant");
     let rect = app.view3d.rect.expect("the 3D view was drawn");
@@ -469,13 +464,30 @@ fn branches_are_drawn_and_moved_in_the_3d_view() {
         (rect.width() * ppp).round() as u32,
         (rect.height() * ppp).round() as u32,
     );
-    let screen_of = |p: &Point3<f64>| {
-        let (uv, _) = camera.project(p).unwrap();
-        rect.min + egui::vec2(uv.x as f32, uv.y as f32) / ppp
-    };
+    (camera, rect, ppp)
+}
+
+/// Where a world point appears on the screen in the 3D view.
+fn screen_point(camera: &ViewCamera, rect: egui::Rect, ppp: f32, p: &Point3<f64>) -> Pos2 {
+    let (uv, _) = camera.project(p).unwrap();
+    rect.min + egui::vec2(uv.x as f32, uv.y as f32) / ppp
+}
+
+#[test]
+fn branches_are_drawn_and_moved_in_the_3d_view() {
+    let config = tempfile::tempdir().unwrap();
+    let mut harness = harness_with(dataset().to_path_buf(), config.path());
+    harness.state_mut().layout = frond_ui::CentralLayout::ThreeD;
+    harness.run_steps(3);
+    let before = session(&harness).branches().branches.len();
+    let stem = session(&harness).branches().branches[0].clone();
+    // The tools' panels change the 3D view's size, and with it the camera: each step projects
+    // with the view as it is once its tool is on.
+    key(&mut harness, Key::B);
+    let (camera, rect, ppp) = view_camera(&harness);
+    let screen_of = |p: &Point3<f64>| screen_point(&camera, rect, ppp, p);
 
     // Draw from the stem's middle out to the side.
-    key(&mut harness, Key::B);
     let start = screen_of(&stem.cylinder.skeleton.point_at_fraction(0.5));
     let stroke: Vec<Pos2> = (0..=10)
         .map(|k| start + egui::vec2(5.0 * k as f32, -2.0 * k as f32))
@@ -486,6 +498,8 @@ fn branches_are_drawn_and_moved_in_the_3d_view() {
 
     // Move its last control point 20 points down in the view.
     key(&mut harness, Key::V);
+    let (camera, rect, ppp) = view_camera(&harness);
+    let screen_of = |p: &Point3<f64>| screen_point(&camera, rect, ppp, p);
     let last = drawn.cylinder.skeleton.control_points().len() - 1;
     let tip = screen_of(&drawn.cylinder.skeleton.control_points()[last]);
     let target = tip + egui::vec2(0.0, 20.0);
@@ -501,6 +515,9 @@ fn branches_are_drawn_and_moved_in_the_3d_view() {
 
     // Drag the tip's radius out to 12 points from its centre.
     key(&mut harness, Key::R);
+    let (camera, rect, ppp) = view_camera(&harness);
+    let screen_of = |p: &Point3<f64>| screen_point(&camera, rect, ppp, p);
+    let moved_tip = screen_of(&moved.cylinder.skeleton.control_points()[last]);
     let (_, depth) = camera
         .project(&moved.cylinder.skeleton.control_points()[last])
         .unwrap();
