@@ -1099,7 +1099,8 @@ fn chain_radii(chain: &[usize], nodes: &[Node], points: &[Point3<f64>]) -> Vec<f
 /// their geometry and move to whichever part they leave from. The stem gets one radius, the
 /// median of its levels' ([`chain_radii`]): its first levels are arcs of its ring, too thin,
 /// and its last the crown's knot, too wide (a linear fit went from 8 to 30 mm on a 14 mm
-/// stem). Returns whether it split.
+/// stem). The continuation's radii are fitted without the fork's level. Returns whether it
+/// split.
 fn split_stem(
     branches: &mut Vec<Branch>,
     chain: &[usize],
@@ -1143,6 +1144,23 @@ fn split_stem(
         && radius > 0.0
     {
         stem.cylinder = GeneralizedCylinder::new(stem.cylinder.skeleton.clone(), radius, radius);
+    }
+    // The continuation's radii leave out the fork's own level (the crown's knot).
+    let mut continuation = continuation;
+    if let Some(beyond) = branch_from_chain(
+        continuation_id,
+        Some(0),
+        Some(1.0),
+        &polyline[cut + 1..],
+        &chain[fork + 1..],
+        nodes,
+        points,
+    ) {
+        continuation.cylinder = GeneralizedCylinder::new(
+            continuation.cylinder.skeleton.clone(),
+            beyond.cylinder.radius_start,
+            beyond.cylinder.radius_end,
+        );
     }
     for branch in branches.iter_mut().filter(|b| b.parent == Some(0)) {
         let start = branch.cylinder.skeleton.point_at_fraction(0.0);
