@@ -551,8 +551,8 @@ const TUBE_ROUNDNESS: f64 = 0.3;
 /// branch or with no such point is left out. So is a flat piece (less round than
 /// [`TUBE_ROUNDNESS`]) whose bridge would be longer than its main branch: stereo smears a
 /// petiole into a flat band too, but then beside the tree, while a band of leaf edge or halo
-/// hangs off the foliage, far from every axis (from photos of broadleaf seeds 1–3, such
-/// pieces were 9 % on the plant, their bridges included). Returns how many pieces were
+/// hangs off the foliage, far from every axis (from photos of broadleaf seeds 1–3 and 11–13,
+/// such pieces were 9 % on the plant, their bridges included). Returns how many pieces were
 /// added.
 fn bridge_pieces(
     branches: &mut Vec<Branch>,
