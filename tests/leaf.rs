@@ -48,6 +48,26 @@ fn reconstruct_into(input: &Path, out: &Path) -> Value {
     read_json(&out.join("report.json"))
 }
 
+/// `frond eval --json [EXTRA] --gt DATASET --pred OUT` on the shared dataset, which must
+/// succeed; its report.
+fn eval_json(out: &Path, extra: &[&str]) -> Value {
+    let output = cargo_bin_cmd!("frond")
+        .args(["eval", "--json"])
+        .args(extra)
+        .arg("--gt")
+        .arg(dataset())
+        .arg("--pred")
+        .arg(out)
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    serde_json::from_slice(&output.stdout).unwrap()
+}
+
 fn read_json(path: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -123,15 +143,7 @@ fn reconstruct_writes_every_output_and_a_report() {
 #[test]
 fn reconstructed_leaves_meet_the_accuracy_targets() {
     let out = reconstruction();
-    let output = cargo_bin_cmd!("frond")
-        .args(["eval", "--json", "--gt"])
-        .arg(dataset())
-        .arg("--pred")
-        .arg(out)
-        .output()
-        .unwrap();
-    assert!(output.status.success());
-    let eval: Value = serde_json::from_slice(&output.stdout).unwrap();
+    let eval = eval_json(out, &[]);
     // The automatic skeleton follows the stem and finds the petioles.
     let skeleton = &eval["skeleton"];
     eprintln!("skeleton: {skeleton}");
@@ -163,15 +175,7 @@ fn reconstructed_leaves_meet_the_accuracy_targets() {
 /// main axis (stem and petiole, 0.3 m) matched no true branch's length; now the true stem is
 /// matched, 38 % long (it ends a level or two up in the crown's knot).
 fn stem_ends_at_its_crown(out: &Path) {
-    let output = cargo_bin_cmd!("frond")
-        .args(["eval", "--json", "--traits", "--gt"])
-        .arg(dataset())
-        .arg("--pred")
-        .arg(out)
-        .output()
-        .unwrap();
-    assert!(output.status.success());
-    let traits: Value = serde_json::from_slice(&output.stdout).unwrap();
+    let traits = eval_json(out, &["--traits"]);
     let stem = traits["branches"]
         .as_array()
         .unwrap()
@@ -542,19 +546,7 @@ fn reconstruct_writes_traits_and_traits_follow_the_scale() {
     assert!(String::from_utf8_lossy(&bad.stderr).contains("expected X1,Y1,Z1:X2,Y2,Z2:METRES"));
 
     // Against the truth: the synthetic world is metric, so model units are metres here.
-    let output = cargo_bin_cmd!("frond")
-        .args(["eval", "--traits", "--json", "--gt"])
-        .arg(dataset())
-        .arg("--pred")
-        .arg(out)
-        .output()
-        .unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    let accuracy: Value = serde_json::from_slice(&output.stdout).unwrap();
+    let accuracy = eval_json(out, &["--traits"]);
     eprintln!(
         "{}",
         serde_json::to_string(&accuracy["leaf_area_relative_error"]).unwrap()

@@ -401,7 +401,7 @@ fn connected_skeleton(
     };
     let mut branches: Vec<Branch> = Vec::new();
     // The main axis's chain and polyline, and where along them its stem ends.
-    let mut stem_split: Option<(Vec<usize>, Vec<Point3<f64>>, usize)> = None;
+    let mut stem_split: Option<(Vec<usize>, Vec<Point3<f64>>, StemTop)> = None;
     // (first node, parent branch id, attachment node)
     let mut queue: Vec<(usize, Option<u32>, Option<usize>)> = vec![(root_node, None, None)];
     let min_length = options.min_branch_levels * level_width;
@@ -489,9 +489,9 @@ fn connected_skeleton(
         let id = branch.id;
         if parent.is_none()
             && role == Role::Plant
-            && let Some(fork) = stem_top(&chain, &nodes, points)
+            && let Some(top) = stem_top(&chain, &nodes, points)
         {
-            stem_split = Some((chain.clone(), polyline.clone(), fork));
+            stem_split = Some((chain.clone(), polyline.clone(), top));
         }
         branches.push(branch);
         // Side branches start at each chain node's other children, base first.
@@ -510,8 +510,8 @@ fn connected_skeleton(
             }
         }
     }
-    if let Some((chain, polyline, fork)) = stem_split
-        && split_stem(&mut branches, &chain, &polyline, fork, &nodes, points)
+    if let Some((chain, polyline, top)) = stem_split
+        && split_stem(&mut branches, &chain, &polyline, &top, &nodes, points)
     {
         stats.stems_ended += 1;
     }
@@ -1045,9 +1045,8 @@ struct Anchor {
 /// local axis; at the fork, the median over the next four nodes is less than half of both
 /// the chain's median up to the fork and the median of the last four nodes up to it (a
 /// gradual taper does not end a stem), and none of the next eight reaches the chain's median
-/// (sparse points split a ring into arcs that read thin for a level or two). Returns the
-/// fork's position in `chain`.
-fn stem_top(chain: &[usize], nodes: &[Node], points: &[Point3<f64>]) -> Option<usize> {
+/// (sparse points split a ring into arcs that read thin for a level or two).
+fn stem_top(chain: &[usize], nodes: &[Node], points: &[Point3<f64>]) -> Option<StemTop> {
     const STEM_NODES: usize = 4;
     const AHEAD: usize = 4;
     const CONFIRM: usize = 8;
@@ -1057,20 +1056,31 @@ fn stem_top(chain: &[usize], nodes: &[Node], points: &[Point3<f64>]) -> Option<u
     }
     let radii = chain_radii(chain, nodes, points);
     let median = |range: &[f64]| crate::util::stats::median(range.iter().copied());
-    (STEM_NODES - 1..chain.len() - AHEAD).find(|&k| {
+    (STEM_NODES - 1..chain.len() - AHEAD).find_map(|k| {
         if nodes[chain[k]].children.len() < 2 {
-            return false;
+            return None;
         }
-        let (Some(behind), Some(local), Some(ahead)) = (
-            median(&radii[..=k]),
-            median(&radii[k + 1 - STEM_NODES..=k]),
-            median(&radii[k + 1..k + 1 + AHEAD]),
-        ) else {
-            return false;
-        };
+        let behind = median(&radii[..=k])?;
+        let local = median(&radii[k + 1 - STEM_NODES..=k])?;
+        let ahead = median(&radii[k + 1..k + 1 + AHEAD])?;
         let confirm = &radii[k + 1..(k + 1 + CONFIRM).min(chain.len())];
-        ahead < RATIO * behind.min(local) && confirm.iter().all(|&r| r < behind)
+        (ahead < RATIO * behind.min(local) && confirm.iter().all(|&r| r < behind)).then_some(
+            StemTop {
+                fork: k,
+                radius: behind,
+            },
+        )
     })
+}
+
+/// Where a stem ends ([`stem_top`]).
+struct StemTop {
+    /// The fork's position in the main axis's chain.
+    fork: usize,
+    /// The median of the stem's levels' radii up to the fork: its first levels are arcs of
+    /// its ring, too thin, and its last the crown's knot, too wide (a linear fit went from 8
+    /// to 30 mm on a 14 mm stem).
+    radius: f64,
 }
 
 /// Each chain node's median distance from the chain's local axis (through its neighbours'
@@ -1094,74 +1104,61 @@ fn chain_radii(chain: &[usize], nodes: &[Node], points: &[Point3<f64>]) -> Vec<f
 }
 
 /// Splits the main axis (branch 0, built from `chain` through `polyline`) at the top of its
-/// stem, the chain's node `fork` ([`stem_top`]): the stem ends there and the rest of the axis
-/// becomes a branch of its own from the stem's tip, with the same nodes. Side branches keep
-/// their geometry and move to whichever part they leave from. The stem gets one radius, the
-/// median of its levels' ([`chain_radii`]): its first levels are arcs of its ring, too thin,
-/// and its last the crown's knot, too wide (a linear fit went from 8 to 30 mm on a 14 mm
-/// stem). The continuation's radii are fitted without the fork's level. Returns whether it
-/// split.
+/// stem ([`stem_top`]): the stem ends at the fork, with one radius ([`StemTop::radius`]), and
+/// the rest of the axis becomes a branch of its own from the stem's tip, through the same
+/// nodes, its radii fitted without the fork's level (the crown's knot). Side branches keep
+/// their geometry and move to whichever part they leave from. Returns whether it split.
 fn split_stem(
     branches: &mut Vec<Branch>,
     chain: &[usize],
     polyline: &[Point3<f64>],
-    fork: usize,
+    top: &StemTop,
     nodes: &[Node],
     points: &[Point3<f64>],
 ) -> bool {
+    let fork = top.fork;
     let Some(offset) = polyline.len().checked_sub(chain.len()) else {
         return false;
     };
     let cut = fork + offset;
-    if branches.is_empty() || cut < 1 || cut + 2 > polyline.len() || fork + 2 > chain.len() {
+    if branches.is_empty() || cut < 1 || cut + 3 > polyline.len() || top.radius <= 0.0 {
         return false;
     }
-    let split_fraction = attachment_fraction(&branches[0], &polyline[cut]);
     let continuation_id = branches.len() as u32;
-    let (Some(mut stem), Some(continuation)) = (
-        branch_from_chain(
-            0,
-            None,
-            None,
-            &polyline[..=cut],
-            &chain[..=fork],
-            nodes,
-            points,
-        ),
+    let (Some(stem_axis), Some(continuation_axis), Some(beyond)) = (
+        spline_through(&polyline[..=cut]),
+        spline_through(&polyline[cut..]),
         branch_from_chain(
             continuation_id,
             Some(0),
             Some(1.0),
-            &polyline[cut..],
-            &chain[fork..],
+            &polyline[cut + 1..],
+            &chain[fork + 1..],
             nodes,
             points,
         ),
     ) else {
         return false;
     };
-    if let Some(radius) = crate::util::stats::median(chain_radii(&chain[..=fork], nodes, points))
-        && radius > 0.0
-    {
-        stem.cylinder = GeneralizedCylinder::new(stem.cylinder.skeleton.clone(), radius, radius);
-    }
-    // The continuation's radii leave out the fork's own level (the crown's knot).
-    let mut continuation = continuation;
-    if let Some(beyond) = branch_from_chain(
-        continuation_id,
-        Some(0),
-        Some(1.0),
-        &polyline[cut + 1..],
-        &chain[fork + 1..],
-        nodes,
-        points,
-    ) {
-        continuation.cylinder = GeneralizedCylinder::new(
-            continuation.cylinder.skeleton.clone(),
+    let split_fraction = attachment_fraction(&branches[0], &polyline[cut]);
+    let stem = Branch {
+        id: 0,
+        parent: None,
+        parent_fraction: branches[0].parent_fraction,
+        cylinder: GeneralizedCylinder::new(stem_axis, top.radius, top.radius),
+        leaf_at_tip: false,
+    };
+    let continuation = Branch {
+        id: continuation_id,
+        parent: Some(0),
+        parent_fraction: 1.0,
+        cylinder: GeneralizedCylinder::new(
+            continuation_axis,
             beyond.cylinder.radius_start,
             beyond.cylinder.radius_end,
-        );
-    }
+        ),
+        leaf_at_tip: branches[0].leaf_at_tip,
+    };
     for branch in branches.iter_mut().filter(|b| b.parent == Some(0)) {
         let start = branch.cylinder.skeleton.point_at_fraction(0.0);
         if branch.parent_fraction > split_fraction {
@@ -1171,12 +1168,8 @@ fn split_stem(
             branch.parent_fraction = attachment_fraction(&stem, &start);
         }
     }
-    let leaf_at_tip = branches[0].leaf_at_tip;
     branches[0] = stem;
-    branches.push(Branch {
-        leaf_at_tip,
-        ..continuation
-    });
+    branches.push(continuation);
     true
 }
 
