@@ -17,6 +17,12 @@ use crate::eval::align::Similarity;
 pub struct LeafComparison {
     pub gt_leaf: u32,
     pub leaf: u32,
+    /// The true and the reconstructed one-sided area and midrib length (truth's units), so a
+    /// bias (too small, too long) shows, not only the size of the error.
+    pub gt_area: f64,
+    pub area: f64,
+    pub gt_length: f64,
+    pub length: f64,
     pub area_relative_error: f64,
     pub length_relative_error: f64,
     pub inclination_error_deg: f64,
@@ -27,6 +33,9 @@ pub struct LeafComparison {
 pub struct BranchComparison {
     pub gt_branch: u32,
     pub branch: u32,
+    /// True and reconstructed length (truth's units).
+    pub gt_length: f64,
+    pub length: f64,
     pub length_relative_error: f64,
     /// Symmetric mean centreline distance / the tolerance it was matched under.
     pub distance: f64,
@@ -133,6 +142,10 @@ pub fn compare(
             leaves.push(LeafComparison {
                 gt_leaf,
                 leaf,
+                gt_area: ga,
+                area: pa,
+                gt_length: gl,
+                length: pl,
                 area_relative_error: (pa - ga).abs() / ga,
                 length_relative_error: (pl - gl).abs() / gl,
                 inclination_error_deg: (pi - gi).abs(),
@@ -168,6 +181,8 @@ pub fn compare(
         branches.push(BranchComparison {
             gt_branch: g.id,
             branch: p.id,
+            gt_length: gl,
+            length: pl,
             length_relative_error: (pl - gl).abs() / gl,
             distance: d,
         });
@@ -327,9 +342,18 @@ mod tests {
         let leaf = &accuracy.leaves[0];
         assert!((leaf.area_relative_error - 0.21).abs() < 1e-4, "{leaf:?}");
         assert!((leaf.length_relative_error - 0.1).abs() < 1e-4, "{leaf:?}");
+        // The values behind the errors keep their sign: the prediction is the larger one.
+        assert!((leaf.area / leaf.gt_area - 1.21).abs() < 1e-4, "{leaf:?}");
+        assert!(
+            (leaf.length / leaf.gt_length - 1.1).abs() < 1e-4,
+            "{leaf:?}"
+        );
         assert!(leaf.inclination_error_deg < 1e-6);
         assert_eq!(accuracy.branches.len(), 1);
         assert!((accuracy.branches[0].length_relative_error - 0.01).abs() < 1e-9);
+        assert!(
+            (accuracy.branches[0].length - accuracy.branches[0].gt_length - 0.003).abs() < 1e-9
+        );
         // A stem far away is not matched.
         let mut far = organs(1.0, 0.0);
         for c in &mut far.branches[0].centerline {
