@@ -643,6 +643,20 @@ mod tests {
     }
 
     #[test]
+    fn sparse_votes_do_not_seed_the_foreground() {
+        // Superpixels of 100 px: two under the leaf (30 and 28 votes), two just off its edge
+        // with a halo point or two, one that other points outvote.
+        let seeds = foreground_seeds(&[30, 2, 6, 28, 1], &[0, 0, 9, 0, 0], &[100; 5]);
+        assert_eq!(seeds, vec![true, false, false, true, false]);
+        // Density is per pixel: a small superpixel with few votes is as dense as a big one.
+        let seeds = foreground_seeds(&[30, 3, 28], &[0, 0, 0], &[100, 10, 100]);
+        assert_eq!(seeds, vec![true, true, true]);
+        // Where every dense superpixel is outvoted, the sparse ones the segment holds seed it.
+        let seeds = foreground_seeds(&[30, 2, 40], &[50, 0, 60], &[100; 3]);
+        assert_eq!(seeds, vec![false, true, false]);
+    }
+
+    #[test]
     fn no_foreground_is_an_error() {
         let superpixels = Oversegmentation::compute(&scene(), &BoundaryOptions::default()).unwrap();
         let err = superpixels.boundary(&[Point2::new(-5.0, 3.0)], &[], &BoundaryOptions::default());
