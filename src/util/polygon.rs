@@ -2,16 +2,21 @@
 
 use nalgebra::Point2;
 
-/// Area enclosed by a closed polygon (shoelace formula).
-pub fn polygon_area(polygon: &[Point2<f64>]) -> f64 {
+/// Twice the signed area of a closed polygon (shoelace formula): positive counter-clockwise
+/// in x-right, y-up axes.
+fn twice_signed_area(polygon: &[Point2<f64>]) -> f64 {
     let n = polygon.len();
-    0.5 * (0..n)
+    (0..n)
         .map(|i| {
             let (a, b) = (polygon[i], polygon[(i + 1) % n]);
             a.x * b.y - b.x * a.y
         })
-        .sum::<f64>()
-        .abs()
+        .sum()
+}
+
+/// Area enclosed by a closed polygon (shoelace formula).
+pub fn polygon_area(polygon: &[Point2<f64>]) -> f64 {
+    0.5 * twice_signed_area(polygon).abs()
 }
 
 /// Area of the convex hull of a point set (Andrew's monotone chain, then the shoelace formula).
@@ -85,12 +90,7 @@ pub fn inside_polygon<V: Copy + Into<[f64; 2]>>(p: &Point2<f64>, polygon: &[V]) 
 /// outward gives back the region's edge.
 pub fn offset_polygon(polygon: &[Point2<f64>], distance: f64) -> Vec<Point2<f64>> {
     let n = polygon.len();
-    let signed: f64 = (0..n)
-        .map(|i| {
-            let (a, b) = (polygon[i], polygon[(i + 1) % n]);
-            a.x * b.y - b.x * a.y
-        })
-        .sum();
+    let signed = twice_signed_area(polygon);
     if n < 3 || signed == 0.0 {
         return polygon.to_vec();
     }
