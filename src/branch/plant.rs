@@ -136,7 +136,7 @@ pub struct PlantSkeletonOptions {
 }
 
 /// The pot of the labels, when at least [`MIN_POT_POINTS`] points are labelled pot
-/// ([`pot_from_points`], with every point of the plant's foreground as a voter for the wall).
+/// ([`pot_from_points`], with the foreground's [`crate::segment::pot::wall_voters`]).
 pub fn pot_shape(segmentation: &Segmentation, labels: &Labels) -> Option<PotShape> {
     let foreground = &segmentation.foreground;
     let positions = &segmentation.points.positions;
@@ -144,18 +144,7 @@ pub fn pot_shape(segmentation: &Segmentation, labels: &Labels) -> Option<PotShap
         .filter(|&i| labels.label_of_point(i) == Some(SegmentLabel::Pot))
         .map(|i| positions[i])
         .collect();
-    // Labels often give only pieces of the wall; what else stands at the wall's heights is
-    // outvoted by the wall.
-    let voters: Vec<Point3<f64>> = (0..positions.len())
-        .filter(|&i| {
-            matches!(
-                foreground.class[i],
-                crate::segment::foreground::PointClass::Plant
-                    | crate::segment::foreground::PointClass::Stem
-            )
-        })
-        .map(|i| positions[i])
-        .collect();
+    let voters = crate::segment::pot::wall_voters(positions, foreground);
     pot_from_points(&pot, &voters, &foreground.up, &foreground.plant_center)
 }
 

@@ -1553,6 +1553,19 @@ mod tests {
         out
     }
 
+    /// A vertical stem branch (id 0) from the origin up to `top`, of one radius, and its axis.
+    fn vertical_stem(top: f64, radius: f64) -> ([Point3<f64>; 2], Branch) {
+        let axis = [Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, top)];
+        let stem = Branch {
+            id: 0,
+            parent: None,
+            parent_fraction: 0.0,
+            cylinder: GeneralizedCylinder::new(Spline::new(axis.to_vec()).unwrap(), radius, radius),
+            leaf_at_tip: false,
+        };
+        (axis, stem)
+    }
+
     /// The default skeleton of points around a vertical axis through the origin.
     fn skeleton_z_up(points: &[Point3<f64>]) -> (BranchTree, SkeletonStats) {
         automatic_skeleton(
@@ -1702,18 +1715,7 @@ mod tests {
     #[test]
     fn a_clean_base_that_starts_late_is_extended_to_where_it_leaves_the_stem() {
         let mut rng = Rng::seed_from(21);
-        let stem_axis = [Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, 0.2)];
-        let stem = Branch {
-            id: 0,
-            parent: None,
-            parent_fraction: 0.0,
-            cylinder: GeneralizedCylinder::new(
-                Spline::new(stem_axis.to_vec()).unwrap(),
-                0.006,
-                0.006,
-            ),
-            leaf_at_tip: false,
-        };
+        let (stem_axis, stem) = vertical_stem(0.2, 0.006);
         let mut points = tube(&stem_axis, 0.006, 12_000.0, &mut rng);
         // A straight petiole leaving the stem's axis at 60 mm, 30° from the vertical. The
         // level sets parted it from the stem 20 mm along it: its chain starts there, straight
@@ -1843,18 +1845,7 @@ mod tests {
     #[test]
     fn a_tube_no_branch_explains_becomes_a_branch_from_the_stem() {
         let mut rng = Rng::seed_from(8);
-        let stem_axis = [Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, 0.12)];
-        let stem = Branch {
-            id: 0,
-            parent: None,
-            parent_fraction: 0.0,
-            cylinder: GeneralizedCylinder::new(
-                Spline::new(stem_axis.to_vec()).unwrap(),
-                0.005,
-                0.005,
-            ),
-            leaf_at_tip: false,
-        };
+        let (stem_axis, stem) = vertical_stem(0.12, 0.005);
         let mut points = tube(&stem_axis, 0.005, 6_000.0, &mut rng);
         // A petiole from the stem at 60 mm, 40° from vertical; its first 25 mm hug the
         // stem's own points, the rest is unexplained.

@@ -409,20 +409,8 @@ fn classify(
         Some(floor) => floor.signed_distance(p),
         None => up.dot(&(p - foreground.plant_center)),
     };
-    let radial: Vec<f64> = points
-        .iter()
-        .map(|p| {
-            let d = p - foreground.plant_center;
-            (d - up * up.dot(&d)).norm()
-        })
-        .collect();
-    let mean_radius = radial.iter().sum::<f64>() / radial.len() as f64;
-    let spread = (radial
-        .iter()
-        .map(|r| (r - mean_radius).powi(2))
-        .sum::<f64>()
-        / radial.len() as f64)
-        .sqrt();
+    let (mean_radius, spread) =
+        super::pot::radial_mean_and_spread(points, &foreground.plant_center, &up);
     // Which twelfths of the circle around the axis the segment covers: a leaf never wraps
     // around the plant's axis, the pot and the soil do.
     let reference = crate::util::geometry::any_perpendicular(&up);
@@ -470,15 +458,9 @@ fn label_pot_wall(
         .filter(|s| s.label == SegmentLabel::Pot)
         .flat_map(|s| s.points.iter().map(|&i| positions[i as usize]))
         .collect();
-    let voters: Vec<Point3<f64>> = positions
-        .iter()
-        .zip(&foreground.class)
-        .filter(|(_, c)| matches!(c, PointClass::Plant | PointClass::Stem))
-        .map(|(p, _)| *p)
-        .collect();
     let Some(pot) = super::pot::pot_from_points(
         &pot_points,
-        &voters,
+        &super::pot::wall_voters(positions, foreground),
         &foreground.up,
         &foreground.plant_center,
     ) else {

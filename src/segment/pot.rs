@@ -5,6 +5,7 @@
 
 use nalgebra::{Point3, Vector3};
 
+use super::foreground::{Foreground, PointClass};
 use crate::util::geometry::concentric_circle_centre;
 
 /// The pot as far as the skeleton needs it: its vertical axis, rim and radius.
@@ -189,17 +190,42 @@ pub fn on_the_wall(points: &[Point3<f64>], pot: &PotShape, up: &Vector3<f64>) ->
     if up.dot(&(centroid - pot.rim_centre.coords)) >= 0.0 {
         return false;
     }
+    let (mean, spread) = radial_mean_and_spread(points, &pot.rim_centre, up);
+    (mean - pot.radius).abs() <= WALL_RADIUS_TOLERANCE * pot.radius
+        && spread < WALL_RADIAL_SPREAD * mean
+}
+
+/// The mean distance of points from the vertical axis through `axis_point` (along `up`) and
+/// the standard deviation of those distances: a surface of revolution about the axis has a
+/// small spread. `(NaN, NaN)` for no points.
+pub fn radial_mean_and_spread(
+    points: &[Point3<f64>],
+    axis_point: &Point3<f64>,
+    up: &Vector3<f64>,
+) -> (f64, f64) {
     let radial: Vec<f64> = points
         .iter()
         .map(|p| {
-            let d = p - pot.rim_centre;
+            let d = p - axis_point;
             (d - up * up.dot(&d)).norm()
         })
         .collect();
+    let n = radial.len() as f64;
     let mean = radial.iter().sum::<f64>() / n;
     let spread = (radial.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / n).sqrt();
-    (mean - pot.radius).abs() <= WALL_RADIUS_TOLERANCE * pot.radius
-        && spread < WALL_RADIAL_SPREAD * mean
+    (mean, spread)
+}
+
+/// The points that vote for the pot's wall ([`pot_from_points`]): every point of the plant's
+/// foreground (plant or stem class). Labels often give only pieces of the wall; what else
+/// stands at the wall's heights is outvoted by the wall.
+pub fn wall_voters(positions: &[Point3<f64>], foreground: &Foreground) -> Vec<Point3<f64>> {
+    positions
+        .iter()
+        .zip(&foreground.class)
+        .filter(|(_, c)| matches!(c, PointClass::Plant | PointClass::Stem))
+        .map(|(p, _)| *p)
+        .collect()
 }
 
 /// How far (a share of the pot's radius) a wall segment's mean distance from the axis may be
