@@ -199,10 +199,11 @@ pub fn judge_split(
 /// Rounds of the two-plane assignment in [`two_sheet_split`].
 const TWO_SHEET_ROUNDS: usize = 15;
 
-/// A group that is no smooth sheet (its sheet residual above [`sheet_tolerance`]) whose best
-/// normalized cut does not separate it into smoother parts: two leaves that touch along a
-/// strong graph connection (one lying on the other) are cut by their planes instead. The
-/// points are assigned to the nearer of two planes and the planes refitted
+/// Cuts a group that is no smooth sheet (its sheet residual above [`sheet_tolerance`]) by its
+/// two best planes: two leaves that touch along a strong graph connection, which no normalized
+/// cut separates (the caller chooses the groups: `segment::automatic::split_stacked_leaves`
+/// tries only groups its leaf test calls leaves). The points are assigned to the nearer of two
+/// planes and the planes refitted
 /// ([`TWO_SHEET_ROUNDS`] rounds, started from the halves across each principal axis, the last
 /// being the two sides of the best single plane; the start that ends with the smallest sum of
 /// squared distances wins).
