@@ -1090,14 +1090,7 @@ mod tests {
                 shape: Shape::of(positions[range.clone()].iter().copied()),
             })
             .collect();
-        let foreground = Foreground {
-            class: vec![PointClass::Plant; n],
-            up: Vector3::z(),
-            floor: None,
-            walls: Vec::new(),
-            plant_center: Point3::new(0.03, -0.025, 0.2),
-            radius_limit: 1.0,
-        };
+        let foreground = upright(PointClass::Plant, n, None, Point3::new(0.03, -0.025, 0.2));
         assert_eq!(label_pot_wall(&mut segments, &positions, &foreground), 1);
         let labels: Vec<SegmentLabel> = segments.iter().map(|s| s.label).collect();
         assert_eq!(
@@ -1117,6 +1110,43 @@ mod tests {
         few[1].label = SegmentLabel::Leaf;
         assert_eq!(label_pot_wall(&mut few, &positions, &foreground), 0);
         assert_eq!(few[1].label, SegmentLabel::Leaf);
+    }
+
+    /// Green points each seen by view 0, ids in order.
+    fn green_points(positions: Vec<Point3<f64>>) -> PointSet {
+        let n = positions.len();
+        PointSet {
+            positions,
+            colors: vec![[40, 160, 40]; n],
+            views: vec![vec![0]; n],
+            point_ids: (0..n as u64).collect(),
+            id_kind: PointIds::default(),
+        }
+    }
+
+    /// The plane z = 0.
+    fn floor_at_zero() -> Plane {
+        Plane {
+            normal: Vector3::z(),
+            offset: 0.0,
+        }
+    }
+
+    /// A foreground with `z` up, every one of `n` points of one class.
+    fn upright(
+        class: PointClass,
+        n: usize,
+        floor: Option<Plane>,
+        plant_center: Point3<f64>,
+    ) -> Foreground {
+        Foreground {
+            class: vec![class; n],
+            up: Vector3::z(),
+            floor,
+            walls: Vec::new(),
+            plant_center,
+            radius_limit: 1.0,
+        }
     }
 
     /// Deterministic jitter in [−1, 1].
@@ -1161,24 +1191,13 @@ mod tests {
                 .map(|(k, p)| p + Vector3::new(0.0, 0.0, 0.3 * noise * jitter(k + 3))),
         );
         let n = positions.len();
-        let points = PointSet {
-            positions,
-            colors: vec![[40, 160, 40]; n],
-            views: vec![vec![0]; n],
-            point_ids: (0..n as u64).collect(),
-            id_kind: PointIds::default(),
-        };
-        let mut foreground = Foreground {
-            class: vec![PointClass::Stem; n],
-            up: Vector3::z(),
-            floor: Some(Plane {
-                normal: Vector3::z(),
-                offset: 0.0,
-            }),
-            walls: Vec::new(),
-            plant_center: Point3::new(0.05, 0.05, 0.2),
-            radius_limit: 1.0,
-        };
+        let points = green_points(positions);
+        let mut foreground = upright(
+            PointClass::Stem,
+            n,
+            Some(floor_at_zero()),
+            Point3::new(0.05, 0.05, 0.2),
+        );
         let mut point_segment = vec![None; n];
         let mut segments = Vec::new();
         let mut noise_of_segment = Vec::new();
@@ -1263,13 +1282,7 @@ mod tests {
             }
         }
         let n = positions.len();
-        let points = PointSet {
-            positions,
-            colors: vec![[40, 160, 40]; n],
-            views: vec![vec![0]; n],
-            point_ids: (0..n as u64).collect(),
-            id_kind: PointIds::default(),
-        };
+        let points = green_points(positions);
         let graph = PointGraph::build(
             &points,
             &[],
@@ -1279,17 +1292,12 @@ mod tests {
             },
         );
         let adjacency = graph.adjacency();
-        let foreground = Foreground {
-            class: vec![PointClass::Plant; n],
-            up: Vector3::z(),
-            floor: Some(Plane {
-                normal: Vector3::z(),
-                offset: 0.0,
-            }),
-            walls: Vec::new(),
-            plant_center: Point3::new(0.0, 0.0, 0.2),
-            radius_limit: 1.0,
-        };
+        let foreground = upright(
+            PointClass::Plant,
+            n,
+            Some(floor_at_zero()),
+            Point3::new(0.0, 0.0, 0.2),
+        );
         // The leaf test's cubic height field bends over such a pair where a quadratic one does
         // not; the band between the two is narrow, so the sheet tolerance is set inside it
         // here (the pair's residuals: 0.0088 cubic, 0.0107 quadratic, of its length).
