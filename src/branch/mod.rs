@@ -17,6 +17,7 @@ pub mod attach;
 pub mod compound;
 pub mod handles;
 pub mod plant;
+pub mod prune;
 pub mod skeleton;
 pub mod spline;
 pub mod tube;

@@ -7,6 +7,7 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::prune::{LeafPieceTest, branch_evidence, prune_leaf_pieces};
 use super::skeleton::{SkeletonError, SkeletonOptions, SkeletonStats, automatic_skeleton};
 use super::{BranchTree, CylinderMeshing};
 use crate::graph::neighbours::Neighbours;
@@ -31,14 +32,15 @@ pub fn skeleton_point_indices(foreground: &Foreground, labels: &Labels) -> Vec<u
         .collect()
 }
 
-/// Whether a point counts as sheet in the [`TubeTest`]: on a leaf or the pot, but not a leaf's
-/// rim that the stem test found on a tube.
+/// Whether a point is on a leaf's sheet: in a segment labelled leaf, but not a leaf's rim that
+/// the stem test found on a tube.
+fn on_leaf_sheet(foreground: &Foreground, labels: &Labels, i: usize) -> bool {
+    labels.label_of_point(i) == Some(SegmentLabel::Leaf) && foreground.class[i] != PointClass::Stem
+}
+
+/// Whether a point counts as sheet in the [`TubeTest`]: on a leaf's sheet or the pot.
 fn counts_as_sheet(foreground: &Foreground, labels: &Labels, i: usize) -> bool {
-    match labels.label_of_point(i) {
-        Some(SegmentLabel::Leaf) => foreground.class[i] != PointClass::Stem,
-        Some(SegmentLabel::Pot) => true,
-        _ => false,
-    }
+    on_leaf_sheet(foreground, labels, i) || labels.label_of_point(i) == Some(SegmentLabel::Pot)
 }
 
 /// Which candidate points are not the edge of a leaf or the pot: from photos the candidates
@@ -133,6 +135,7 @@ pub fn skeleton_points(
 pub struct PlantSkeletonOptions {
     pub tube: TubeTest,
     pub skeleton: SkeletonOptions,
+    pub leaf_pieces: LeafPieceTest,
 }
 
 /// The pot of the labels, when at least [`MIN_POT_POINTS`] points are labelled pot
@@ -225,9 +228,44 @@ pub fn automatic_plant_skeleton(
 ) -> Result<(BranchTree, SkeletonStats), SkeletonError> {
     let (points, base) = skeleton_input(segmentation, labels, &options.tube);
     let up = segmentation.foreground.up;
-    let (tree, stats) = automatic_skeleton(&points, &up, &base, &options.skeleton)?;
+    let (mut tree, mut stats) = automatic_skeleton(&points, &up, &base, &options.skeleton)?;
     stem_rises(&tree, &up)?;
+    stats.leaf_pieces_pruned = prune_pieces_of_leaf(
+        &mut tree,
+        segmentation,
+        labels,
+        &points,
+        stats.spacing,
+        &options.leaf_pieces,
+    );
+    stats.branches = tree.branches.len();
     Ok((tree, stats))
+}
+
+/// Removes the side branches drawn on pieces of leaf ([`super::prune`]), measured against the
+/// points of leaf sheets ([`on_leaf_sheet`]). Photos of broadleaf seeds 1–3 and 11–13: length
+/// precision up by 0.006–0.118 (seed 2: 0.539 → 0.657), petiole recall the same but on seed 2
+/// (0.515 → 0.494); held-out seeds 4 and 5: 0.659 → 0.734 and 0.543 → 0.599, recall the same.
+/// Semi-dense points of the same plants lose nothing (no branch is a piece of leaf there).
+fn prune_pieces_of_leaf(
+    tree: &mut BranchTree,
+    segmentation: &Segmentation,
+    labels: &Labels,
+    points: &[Point3<f64>],
+    spacing: f64,
+    test: &LeafPieceTest,
+) -> usize {
+    let Ok(skeleton_points) = Neighbours::new(points.iter().copied()) else {
+        return 0;
+    };
+    let (foreground, positions) = (&segmentation.foreground, &segmentation.points.positions);
+    let sheet: Vec<Point3<f64>> = (0..positions.len())
+        .filter(|&i| on_leaf_sheet(foreground, labels, i))
+        .map(|i| positions[i])
+        .collect();
+    let leaves = Neighbours::new(sheet).ok().filter(|n| !n.is_empty());
+    let evidence = branch_evidence(tree, &skeleton_points, leaves.as_ref(), spacing, test);
+    prune_leaf_pieces(tree, &evidence, test)
 }
 
 /// A main stem rises from the plant's base: the root branch's highest point lies at least a
