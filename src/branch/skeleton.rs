@@ -75,9 +75,9 @@ pub struct SkeletonStats {
     /// Pieces of tube out of the kNN graph's reach, bridged to the tree ([`bridge_pieces`]).
     #[serde(default)]
     pub pieces_bridged: usize,
-    /// Side branches removed as pieces of leaf ([`super::prune`]).
+    /// Side branches removed as the rims of leaves ([`super::prune`]).
     #[serde(default)]
-    pub leaf_pieces_pruned: usize,
+    pub rims_pruned: usize,
 }
 
 /// Why no skeleton could be built.
