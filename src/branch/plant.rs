@@ -235,12 +235,10 @@ pub fn automatic_plant_skeleton(
     let up = segmentation.foreground.up;
     let (mut tree, mut stats) = automatic_skeleton(&points, &up, &base, &options.skeleton)?;
     stem_rises(&tree, &up)?;
-    let sheets: Vec<(Point3<f64>, u32)> = (0..labels.segment_of.len())
+    let positions = &segmentation.points.positions;
+    let sheets: Vec<(Point3<f64>, u32)> = (0..positions.len().min(labels.segment_of.len()))
         .filter(|&i| on_leaf_sheet(&segmentation.foreground, labels, i))
-        .map(|i| {
-            let leaf = labels.segment_of[i].max(0) as u32;
-            (segmentation.points.positions[i], leaf)
-        })
+        .map(|i| (positions[i], labels.segment_of[i].max(0) as u32))
         .collect();
     stats.rims_pruned = remove_leaf_rims(&mut tree, &sheets, stats.spacing, &options.rims);
     stats.branches = tree.branches.len();
