@@ -13,11 +13,16 @@
 //!    its best side distance gives the organ's half-width. Centreline pixels are the response's
 //!    maxima across the bar.
 //! 2. **A sweep along each centreline pixel's ray.** Depths are sampled evenly in inverse
-//!    depth over the view's depth range, finely enough that the projection moves at most half
-//!    a pixel in every neighbour view. A depth is supported by a neighbour view where its
-//!    projection falls on a bar of that view with the same colour. The best-supported depth is
-//!    kept when enough views support it and no other depth does as well (an ambiguous match
-//!    along a row of parallel stems is dropped).
+//!    depth over the part of the view's depth range inside the region of interest, finely
+//!    enough that the projection moves at most half a pixel in every neighbour view. A depth
+//!    is supported by a neighbour view where its projection falls on a bar of that view with
+//!    the same colour. The best-supported depth is kept when enough views support it and no
+//!    other depth does as well (an ambiguous match along a row of parallel stems is dropped).
+//!    This is most of densify's time, so each seed's ray is turned into every neighbour's
+//!    frame once, and a sample stops counting views once it can no longer reach the required
+//!    support (such samples never decide a seed): from photos of broadleaf seed 2 the sweep
+//!    took 15.2 s instead of 24.5 s with the same points (the region clip alone: 0.5 %
+//!    more points, 1.3 % fewer ambiguous seeds).
 //! 3. **Points on the visible surface.** The sweep finds the axis (a bar's centre is the
 //!    projection of the organ's axis); the point is moved towards the camera by the organ's
 //!    radius (half-width × depth / focal), so it lies on the surface the photos show, like the
@@ -360,10 +365,15 @@ impl BarMap {
             + (r(i, j1) * (1.0 - fx) + r(i1, j1) * fx) * fy
     }
 
+    /// The pixel nearest a position (rounded by a cast: `f64::round` is a library call, and
+    /// this runs for every sample of the sweep).
     fn index_of(&self, pixel: &Point2<f64>) -> Option<usize> {
-        let (i, j) = (pixel.x.round(), pixel.y.round());
-        (i >= 0.0 && j >= 0.0 && (i as usize) < self.width && (j as usize) < self.height)
-            .then(|| j as usize * self.width + i as usize)
+        let (x, y) = (pixel.x + 0.5, pixel.y + 0.5);
+        if !(x >= 0.0 && y >= 0.0) {
+            return None;
+        }
+        let (i, j) = (x as usize, y as usize);
+        (i < self.width && j < self.height).then(|| j * self.width + i)
     }
 }
 
@@ -401,8 +411,12 @@ struct SweepView<'a> {
 impl SweepView<'_> {
     /// Loaded-image pixel (array coordinates) of a world point.
     fn pixel_of(&self, point_world: &Point3<f64>) -> Option<Point2<f64>> {
-        let point_camera = self.image.camera_from_world * point_world;
-        let uv = self.camera.project(&point_camera.coords)?;
+        self.pixel_of_camera(&(self.image.camera_from_world * point_world).coords)
+    }
+
+    /// Loaded-image pixel of a point in this view's camera frame.
+    fn pixel_of_camera(&self, point_camera: &Vector3<f64>) -> Option<Point2<f64>> {
+        let uv = self.camera.project(point_camera)?;
         Some(Point2::new(
             uv.x * self.scale.0 - 0.5,
             uv.y * self.scale.1 - 0.5,
@@ -547,6 +561,13 @@ fn sweep_view(
         .filter(|&k| taken.insert(((k % view.bars.width) / 2, (k / view.bars.width) / 2)))
         .collect();
     stats.seeds = seeds.len();
+    // This view's centre in each neighbour's camera frame: a point at depth z on a ray is then
+    // that centre plus z times the ray's direction in the neighbour's frame.
+    let centres: Vec<Vector3<f64>> = neighbours
+        .iter()
+        .map(|&u| (views[u].image.camera_from_world * view.center_world).coords)
+        .collect();
+    let mut rays: Vec<(Vector3<f64>, Vector3<f64>)> = Vec::with_capacity(neighbours.len());
     let focal = view.camera.mean_focal() * 0.5 * (view.scale.0 + view.scale.1);
     let max_color = options.max_color_difference as f32;
     let mut scores: Vec<u8> = Vec::new();
@@ -564,6 +585,15 @@ fn sweep_view(
             continue;
         };
         let at = |z: f64| view.center_world + direction * z;
+        // Only the depths inside the region of interest are swept.
+        let Some((near, far)) = clip_to_region(view.center_world, direction, near, far, roi) else {
+            continue;
+        };
+        rays.clear();
+        rays.extend(neighbours.iter().map(|&u| {
+            let rotation = &views[u].image.camera_from_world.rotation;
+            (rotation * direction, rotation * along)
+        }));
         // Samples evenly in inverse depth, at most half a pixel apart in every neighbour.
         let mut travel = 0.0f64;
         for &u in &neighbours {
@@ -578,18 +608,22 @@ fn sweep_view(
         let inverse_at = |s: f64| 1.0 / near + (1.0 / far - 1.0 / near) * s / (count - 1) as f64;
         // The neighbour views that see a bar of this colour and direction at sample `s` (bit
         // i: `neighbours[i]`), and the sum of their bar responses there (largest on the bars'
-        // centrelines).
-        let support = |s: f64| -> (u8, f32, u64) {
+        // centrelines). `quick`: only the count, and 0 as soon as it cannot reach
+        // `min_supporting` (such samples never decide a seed).
+        let least = options.min_supporting.min(usize::from(u8::MAX)) as u8;
+        let support = |s: f64, quick: bool| -> (u8, f32, u64) {
             let z = 1.0 / inverse_at(s);
-            let point = at(z);
-            if roi.is_some_and(|r| !r.contains(&point)) {
+            if roi.is_some_and(|r| !r.contains(&at(z))) {
                 return (0, 0.0, 0);
             }
-            let ahead = view.center_world + along * z;
             let (mut count, mut strength, mut seen) = (0u8, 0.0f32, 0u64);
             for (bit, &u) in neighbours.iter().enumerate() {
+                if quick && usize::from(count) + neighbours.len() - bit < usize::from(least) {
+                    return (0, 0.0, 0);
+                }
                 let other = &views[u];
-                let Some(pixel) = other.pixel_of(&point) else {
+                let (ray, ray_along) = &rays[bit];
+                let Some(pixel) = other.pixel_of_camera(&(centres[bit] + ray * z)) else {
                     continue;
                 };
                 let Some(index) = other.bars.index_of(&pixel) else {
@@ -599,7 +633,7 @@ fn sweep_view(
                     continue;
                 }
                 // The bar must run the way this one would there.
-                let Some(next) = other.pixel_of(&ahead) else {
+                let Some(next) = other.pixel_of_camera(&(centres[bit] + ray_along * z)) else {
                     continue;
                 };
                 let tangent = next - pixel;
@@ -618,14 +652,16 @@ fn sweep_view(
                 .sqrt();
                 if d <= max_color {
                     count += 1;
-                    strength += other.bars.response_at(&pixel);
+                    if !quick {
+                        strength += other.bars.response_at(&pixel);
+                    }
                     seen |= 1 << bit;
                 }
             }
             (count, strength, seen)
         };
         scores.clear();
-        scores.extend((0..count).map(|s| support(s as f64).0));
+        scores.extend((0..count).map(|s| support(s as f64, true).0));
         let best = scores.iter().copied().max().unwrap_or(0);
         if usize::from(best) < options.min_supporting {
             continue;
@@ -649,14 +685,14 @@ fn sweep_view(
         // Within the run, a tenth of a pixel at a time: where the supporting bars are
         // strongest, i.e. nearest their centrelines.
         let (first, last) = runs[0];
-        let (_, mut best_strength, mut supporting) = support(first as f64);
+        let (_, mut best_strength, mut supporting) = support(first as f64, false);
         let mut best_sample = first as f64;
         let fine_first = first.saturating_sub(1) as f64;
         let fine_last = (last + 1).min(count - 1) as f64;
         let steps = ((fine_last - fine_first) * 10.0).ceil() as usize;
         for t in 0..=steps {
             let s = fine_first + t as f64 * 0.1;
-            let (n, strength, seen) = support(s);
+            let (n, strength, seen) = support(s, false);
             if n >= best && strength > best_strength {
                 (best_sample, best_strength, supporting) = (s, strength, seen);
             }
@@ -687,6 +723,32 @@ fn sweep_view(
         });
     }
     (stats, out)
+}
+
+/// The part of the depth range `near..far` (camera z, with `direction`'s camera-z component 1)
+/// that lies inside the region of interest; `None` when the ray misses it.
+fn clip_to_region(
+    center_world: Point3<f64>,
+    direction: Vector3<f64>,
+    near: f64,
+    far: f64,
+    roi: Option<&RegionOfInterest>,
+) -> Option<(f64, f64)> {
+    let Some(region) = roi else {
+        return Some((near, far));
+    };
+    let offset = center_world - region.center_world;
+    let a = direction.norm_squared();
+    let b = 2.0 * direction.dot(&offset);
+    let c = offset.norm_squared() - region.radius * region.radius;
+    let discriminant = b * b - 4.0 * a * c;
+    if a <= 0.0 || discriminant < 0.0 {
+        return None;
+    }
+    let root = discriminant.sqrt();
+    let (enter, leave) = ((-b - root) / (2.0 * a), (-b + root) / (2.0 * a));
+    let (near, far) = (near.max(enter), far.min(leave));
+    (near < far).then_some((near, far))
 }
 
 /// Organs are curves: a point with fewer than [`MIN_CURVE_NEIGHBOURS`] others within
@@ -839,6 +901,71 @@ mod tests {
                 half >= 0.4 * width as f64 - 0.6 && half <= 0.5 * width as f64 + 2.0,
                 "width {width}: half-width {half}"
             );
+        }
+    }
+
+    #[test]
+    fn a_ray_is_swept_only_where_it_crosses_the_region_of_interest() {
+        let region = RegionOfInterest {
+            center_world: Point3::new(0.0, 0.0, 5.0),
+            radius: 1.0,
+        };
+        let origin = Point3::origin();
+        // Straight through the centre: depths 4 to 6 of 0.5 to 100.
+        let (near, far) =
+            clip_to_region(origin, Vector3::z(), 0.5, 100.0, Some(&region)).expect("crosses");
+        assert!(
+            (near - 4.0).abs() < 1e-9 && (far - 6.0).abs() < 1e-9,
+            "{near} {far}"
+        );
+        // The view's own range still bounds it.
+        let (near, far) =
+            clip_to_region(origin, Vector3::z(), 4.5, 5.5, Some(&region)).expect("crosses");
+        assert!((near - 4.5).abs() < 1e-9 && (far - 5.5).abs() < 1e-9);
+        // A direction with camera-z component 1 but off-axis: depths are camera z, not range.
+        let slanted = Vector3::new(0.1, 0.0, 1.0);
+        let (near, far) =
+            clip_to_region(origin, slanted, 0.5, 100.0, Some(&region)).expect("crosses");
+        for z in [near, far] {
+            let distance = (origin + slanted * z - region.center_world).norm();
+            assert!((distance - 1.0).abs() < 1e-9, "{distance}");
+        }
+        // Missing the region, or the region beyond the range: nothing to sweep.
+        assert!(
+            clip_to_region(
+                origin,
+                Vector3::new(1.0, 0.0, 1.0),
+                0.5,
+                100.0,
+                Some(&region)
+            )
+            .is_none()
+        );
+        assert!(clip_to_region(origin, Vector3::z(), 0.5, 3.0, Some(&region)).is_none());
+        // No region: the view's range.
+        assert_eq!(
+            clip_to_region(origin, Vector3::z(), 0.5, 3.0, None),
+            Some((0.5, 3.0))
+        );
+    }
+
+    #[test]
+    fn a_position_maps_to_its_nearest_pixel_and_outside_positions_to_none() {
+        let bars = BarMap::from_rgb(&vec![[0u8; 3]; 12], 4, 3, 14.0);
+        let at = |x: f64, y: f64| bars.index_of(&Point2::new(x, y));
+        assert_eq!(at(0.0, 0.0), Some(0));
+        assert_eq!(at(-0.4, 0.2), Some(0));
+        assert_eq!(at(1.5, 0.0), Some(2));
+        assert_eq!(at(1.49, 1.6), Some(4 * 2 + 1));
+        assert_eq!(at(3.4, 2.4), Some(11));
+        for (x, y) in [
+            (-0.6, 0.0),
+            (0.0, -0.6),
+            (3.6, 0.0),
+            (0.0, 2.6),
+            (f64::NAN, 0.0),
+        ] {
+            assert_eq!(at(x, y), None, "({x}, {y})");
         }
     }
 
