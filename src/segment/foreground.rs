@@ -171,27 +171,55 @@ fn ransac_plane(
         }
     }
     let (plane, _) = best?;
-    // Refine on all inliers, then recollect them.
-    let inliers: Vec<Point3<f64>> = candidates
-        .iter()
-        .filter(|&&i| plane.signed_distance(&points[i]).abs() < tolerance)
-        .map(|&i| points[i])
-        .collect();
-    let mut refined = Plane::fit(&inliers).unwrap_or(plane);
-    if refined.normal.dot(&plane.normal) < 0.0 {
-        refined.normal = -refined.normal;
-        refined.offset = -refined.offset;
-    }
-    if !accept(&refined) {
-        refined = plane;
-    }
-    let members = candidates
-        .iter()
-        .copied()
-        .filter(|&i| refined.signed_distance(&points[i]).abs() < tolerance)
-        .collect();
-    Some((refined, members))
+    Some(refine_plane(points, candidates, plane, tolerance, accept))
 }
+
+/// Local optimisation of a RANSAC plane: refit on all its inliers among `candidates` and
+/// recollect them, again while that gains inliers. A hypothesis fitted to a few noisy
+/// neighbours may be tilted by a degree or two; its inlier band then crosses the true plane,
+/// and the refits turn it into that plane. (With a single refit, photos of a medium plant gave
+/// a floor of 70k points on one run and of 290k on another, from nearly the same points.)
+fn refine_plane(
+    points: &[Point3<f64>],
+    candidates: &[usize],
+    mut plane: Plane,
+    tolerance: f64,
+    accept: impl Fn(&Plane) -> bool,
+) -> (Plane, Vec<usize>) {
+    let members_of = |plane: &Plane| -> Vec<usize> {
+        candidates
+            .iter()
+            .copied()
+            .filter(|&i| plane.signed_distance(&points[i]).abs() < tolerance)
+            .collect()
+    };
+    let mut members = members_of(&plane);
+    for round in 0..MAX_REFITS {
+        let inliers: Vec<Point3<f64>> = members.iter().map(|&i| points[i]).collect();
+        let Some(mut refined) = Plane::fit(&inliers) else {
+            break;
+        };
+        if refined.normal.dot(&plane.normal) < 0.0 {
+            refined.normal = -refined.normal;
+            refined.offset = -refined.offset;
+        }
+        if !accept(&refined) {
+            break;
+        }
+        let refined_members = members_of(&refined);
+        // The first refit is taken as it is (a least-squares plane of the inliers); later ones
+        // only while they gain.
+        if round > 0 && refined_members.len() <= members.len() {
+            break;
+        }
+        plane = refined;
+        members = refined_members;
+    }
+    (plane, members)
+}
+
+/// Refits of a RANSAC plane on its inliers ([`ransac_plane`]).
+const MAX_REFITS: usize = 10;
 
 /// Labels every point (see the module docs).
 pub fn separate_foreground(
@@ -433,6 +461,42 @@ mod tests {
             (Point3::new(0.0, 1.0, 0.0), Vector3::x()),
         ];
         assert!(closest_point_to_lines(&parallel).is_none());
+    }
+
+    #[test]
+    fn a_tilted_plane_hypothesis_is_refined_onto_the_floor_under_a_pot() {
+        // A floor (z = 0, ±3 mm of noise) and, on it, a pot's soil disc 15 mm up: a plane
+        // hypothesis tilted by 4° through the disc's edge takes a band of floor and soil.
+        let mut rng = Rng::seed_from(3);
+        let mut points = Vec::new();
+        for i in 0..120 {
+            for j in 0..120 {
+                let (x, y) = (-0.6 + 0.01 * f64::from(i), -0.6 + 0.01 * f64::from(j));
+                let noise = 0.006 * (rng.uniform() - 0.5);
+                if x.hypot(y) < 0.12 {
+                    points.push(Point3::new(x, y, 0.015 + noise));
+                } else {
+                    points.push(Point3::new(x, y, noise));
+                }
+            }
+        }
+        let floor_points = points.iter().filter(|p| p.z < 0.01).count();
+        let candidates: Vec<usize> = (0..points.len()).collect();
+        let tilt = 4f64.to_radians();
+        let normal = Vector3::new(0.0, -tilt.sin(), tilt.cos());
+        let hypothesis = Plane {
+            normal,
+            offset: normal.dot(&Vector3::new(0.0, 0.12, 0.012)),
+        };
+        let (plane, members) = refine_plane(&points, &candidates, hypothesis, 0.01, |_| true);
+        let angle = plane.normal.angle(&Vector3::z()).to_degrees();
+        assert!(angle < 0.3, "normal {angle}° off the floor's");
+        assert!(plane.offset.abs() < 0.003, "offset {}", plane.offset);
+        assert!(
+            members.len() as f64 >= 0.98 * floor_points as f64,
+            "{} of {floor_points} floor points",
+            members.len()
+        );
     }
 
     #[test]
