@@ -951,7 +951,7 @@ mod tests {
 
     #[test]
     fn a_position_maps_to_its_nearest_pixel_and_outside_positions_to_none() {
-        let bars = BarMap::from_rgb(&vec![[0u8; 3]; 12], 4, 3, 14.0);
+        let bars = BarMap::from_rgb(&[[0u8; 3]; 12], 4, 3, 14.0);
         let at = |x: f64, y: f64| bars.index_of(&Point2::new(x, y));
         assert_eq!(at(0.0, 0.0), Some(0));
         assert_eq!(at(-0.4, 0.2), Some(0));
