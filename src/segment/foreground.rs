@@ -178,7 +178,7 @@ fn ransac_plane(
 /// recollect them, again while that gains inliers. A hypothesis fitted to a few noisy
 /// neighbours may be tilted by a degree or two; its inlier band then crosses the true plane,
 /// and the refits turn it into that plane. (With a single refit, photos of a medium plant gave
-/// a floor of 70k points on one run and of 290k on another, from nearly the same points.)
+/// a floor of 78k points on one run and of 286k on another, from nearly the same points.)
 fn refine_plane(
     points: &[Point3<f64>],
     candidates: &[usize],
