@@ -610,15 +610,15 @@ fn sweep_view(
         // i: `neighbours[i]`), and the sum of their bar responses there (largest on the bars'
         // centrelines). `quick`: only the count, and 0 as soon as it cannot reach
         // `min_supporting` (such samples never decide a seed).
-        let least = options.min_supporting.min(usize::from(u8::MAX)) as u8;
         let support = |s: f64, quick: bool| -> (u8, f32, u64) {
             let z = 1.0 / inverse_at(s);
+            // The fine search below may step a little past the clipped range.
             if roi.is_some_and(|r| !r.contains(&at(z))) {
                 return (0, 0.0, 0);
             }
             let (mut count, mut strength, mut seen) = (0u8, 0.0f32, 0u64);
             for (bit, &u) in neighbours.iter().enumerate() {
-                if quick && usize::from(count) + neighbours.len() - bit < usize::from(least) {
+                if quick && usize::from(count) + neighbours.len() - bit < options.min_supporting {
                     return (0, 0.0, 0);
                 }
                 let other = &views[u];
