@@ -10,7 +10,7 @@ use std::sync::OnceLock;
 use frond::eval::GroundTruth;
 use frond::eval::dense::{point_accuracy, thin_organ_accuracy};
 use frond::graph::points::PointSet;
-use frond::mvs::{DensifyOptions, MvsError, densify, write_workspace};
+use frond::mvs::{DensifyOptions, MvsError, dense_model, densify, write_workspace};
 use frond::scene::{Reconstruction, Scene, write_model};
 use frond::synth::{Preset, SynthOptions};
 use frond::util::progress::NoProgress;
@@ -71,6 +71,14 @@ fn densified_points_lie_on_the_plant_and_the_workspace_reads_back() {
     let set = PointSet::from_scene(&reread);
     assert_eq!(set.len(), dense.points().len());
     assert!(set.views.iter().all(|v| v.len() >= 2));
+    // fused.ply says which points the thin-organ sweep found, and the point set carries it.
+    let expected = dense_model(&scene.reconstruction, &fused)
+        .unwrap()
+        .thin_organ;
+    assert_eq!(set.thin_organ, expected);
+    let thin = expected.iter().filter(|&&t| t).count();
+    let swept = report.thin.as_ref().map_or(0, |t| t.points);
+    assert!(thin > 0 && thin <= swept, "{thin} of {swept}");
     for (p, point) in dense.points().iter().enumerate().step_by(101) {
         // Each track observation is the point's projection, and fused.ply agrees.
         for t in &point.track {
@@ -100,6 +108,10 @@ fn the_thin_organ_sweep_adds_the_stems_and_petioles_stereo_misses() {
     let (stereo, _) = densify(&scene, &without, &NoProgress).unwrap();
     let thin = report.thin.clone().unwrap();
     assert_eq!(swept.len(), stereo.len() + thin.points, "{thin:?}");
+    // The stereo points come first, then the sweep's, and each says which it is.
+    assert_eq!(swept.thin_organ.len(), swept.len());
+    assert!(!swept.thin_organ[..stereo.len()].iter().any(|&t| t));
+    assert!(swept.thin_organ[stereo.len()..].iter().all(|&t| t));
     let a = thin_organ_accuracy(&truth, &swept.positions_world, 0.002).unwrap();
     let b = thin_organ_accuracy(&truth, &stereo.positions_world, 0.002).unwrap();
     eprintln!("with the sweep {a:?}\nwithout {b:?}\n{thin:?}");

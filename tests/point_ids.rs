@@ -78,6 +78,7 @@ fn segmentation_rows_join_a_dense_workspace_by_point_id() {
         colors: Vec::new(),
         views: Vec::new(),
         support: Vec::new(),
+        thin_organ: Vec::new(),
     };
     for point in model.points() {
         let mut views: Vec<u32> = point
@@ -91,6 +92,7 @@ fn segmentation_rows_join_a_dense_workspace_by_point_id() {
         fused.colors.push(point.color);
         fused.support.push(views.len() as u32);
         fused.views.push(views);
+        fused.thin_organ.push(false);
     }
     let workspace = tempfile::tempdir().unwrap();
     let dense = write_workspace(

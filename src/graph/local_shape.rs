@@ -174,6 +174,7 @@ fn simulated_sheet(spacing: f64, sigma: f64) -> PointSet {
         views: vec![Vec::new(); n],
         point_ids: (0..n as u64).collect(),
         id_kind: Default::default(),
+        thin_organ: Vec::new(),
     }
 }
 
@@ -264,6 +265,7 @@ mod tests {
             views: vec![vec![0]; n],
             point_ids: (0..n as u64).collect(),
             id_kind: Default::default(),
+            thin_organ: Vec::new(),
         }
     }
 

@@ -25,9 +25,17 @@ pub struct PointSet {
     /// Each point's id in the input (see `id_kind`).
     pub point_ids: Vec<u64>,
     pub id_kind: PointIds,
+    /// Per point: whether `frond densify`'s thin-organ sweep found it (empty when the input
+    /// does not say: sparse points, COLMAP's dense points).
+    pub thin_organ: Vec<bool>,
 }
 
 impl PointSet {
+    /// Whether point `i` was found by the thin-organ sweep (false when the input does not say).
+    pub fn is_thin_organ(&self, i: usize) -> bool {
+        self.thin_organ.get(i).copied().unwrap_or(false)
+    }
+
     pub fn len(&self) -> usize {
         self.positions.len()
     }
@@ -77,6 +85,9 @@ impl PointSet {
             set.views.push(views);
             set.point_ids.push(i as u64);
         }
+        if dense.thin_organ.len() == set.positions.len() {
+            set.thin_organ.clone_from(&dense.thin_organ);
+        }
         set.id_kind = PointIds::FusedRow;
         if fused_rows_are_model_points(&set.positions, model) {
             set.id_kind = PointIds::ModelPoint3D;
@@ -95,6 +106,11 @@ impl PointSet {
             views: indices.iter().map(|&i| self.views[i].clone()).collect(),
             point_ids: indices.iter().map(|&i| self.point_ids[i]).collect(),
             id_kind: self.id_kind,
+            thin_organ: if self.thin_organ.is_empty() {
+                Vec::new()
+            } else {
+                indices.iter().map(|&i| self.is_thin_organ(i)).collect()
+            },
         }
     }
 }
@@ -133,6 +149,26 @@ pub fn common_views(a: &[u32], b: &[u32], out: &mut Vec<u32>) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_subset_keeps_which_points_the_thin_organ_sweep_found() {
+        let mut set = PointSet::default();
+        for k in 0..4 {
+            set.positions.push(Point3::new(k as f64, 0.0, 0.0));
+            set.colors.push([0; 3]);
+            set.views.push(vec![0, 1]);
+            set.point_ids.push(k);
+        }
+        assert!(
+            !set.is_thin_organ(1),
+            "unknown reads as not found by the sweep"
+        );
+        assert!(set.subset(&[3, 1]).thin_organ.is_empty());
+        set.thin_organ = vec![false, true, false, true];
+        let subset = set.subset(&[3, 0, 1]);
+        assert_eq!(subset.thin_organ, vec![true, false, true]);
+        assert!(subset.is_thin_organ(2) && !subset.is_thin_organ(1));
+    }
 
     #[test]
     fn intersection_of_sorted_views() {

@@ -89,14 +89,17 @@ impl RegionOfInterest {
     }
 }
 
-/// Fused points: positions, colours, the views (image positions, sorted) that see each, and
-/// how many depth estimates each averages.
+/// Fused points: positions, colours, the views (image positions, sorted) that see each, how
+/// many depth estimates each averages, and whether each was found by the thin-organ sweep
+/// ([`super::thin`]: a point on a stem's or petiole's centreline, not on a surface stereo
+/// matched).
 #[derive(Clone, Debug, Default)]
 pub struct FusedPoints {
     pub positions_world: Vec<Point3<f64>>,
     pub colors: Vec<[u8; 3]>,
     pub views: Vec<Vec<u32>>,
     pub support: Vec<u32>,
+    pub thin_organ: Vec<bool>,
 }
 
 impl FusedPoints {
@@ -315,6 +318,7 @@ pub fn fuse(
             .push(color_sum.map(|s| ((s + weight / 2) / weight) as u8));
         fused.views.push(views);
         fused.support.push(weight as u32);
+        fused.thin_organ.push(false);
         start = end;
     }
     stats.points = fused.len();

@@ -8,7 +8,8 @@
 //! of their shared sparse points; [`fusion`] keeps depths that other views' depth maps agree
 //! with and merges them on a voxel grid. The result is written as a dense workspace that
 //! `frond reconstruct` reads: `sparse/` (cameras, poses and the fused points with tracks),
-//! `images/`, `fused.ply` + `fused.ply.vis` (COLMAP's formats) and `densify.json`.
+//! `images/`, `fused.ply` + `fused.ply.vis` (COLMAP's formats; `fused.ply` also says which
+//! points the thin-organ sweep found, `thin_organ`) and `densify.json`.
 //!
 //! Takes a [`Scene`](crate::scene::Scene) with a sparse model and its photos; returns
 //! [`FusedPoints`] and a [`DensifyReport`], and writes the dense workspace.
@@ -195,6 +196,7 @@ pub fn densify(
         fused.colors.extend(thin.colors);
         fused.views.extend(thin.views);
         fused.support.extend(thin.support);
+        fused.thin_organ.extend(thin.thin_organ);
         report.thin = Some(stats);
         report
             .timings
@@ -415,13 +417,21 @@ fn output_error(path: &Path, e: impl std::fmt::Display) -> MvsError {
     }
 }
 
+/// The fused points as a COLMAP model ([`dense_model`]), with what the model cannot hold.
+#[derive(Clone, Debug)]
+pub struct DenseModel {
+    pub model: Reconstruction,
+    /// Per point of `model` (in order): the image positions that see it.
+    pub visibility: Vec<Vec<u32>>,
+    /// Per point of `model`: whether the thin-organ sweep found it (`fused.ply`'s
+    /// `thin_organ`).
+    pub thin_organ: Vec<bool>,
+}
+
 /// The fused points as a COLMAP model: the scene's cameras and poses, one keypoint per
 /// observation (the point's projection) and the points with their tracks. Observations that
 /// do not project into their image are dropped; so are points left with fewer than 2.
-pub fn dense_model(
-    model: &Reconstruction,
-    fused: &FusedPoints,
-) -> Result<(Reconstruction, Vec<Vec<u32>>), MvsError> {
+pub fn dense_model(model: &Reconstruction, fused: &FusedPoints) -> Result<DenseModel, MvsError> {
     let mut images: Vec<Image> = model
         .images()
         .iter()
@@ -432,6 +442,7 @@ pub fn dense_model(
         .collect();
     let mut points = Vec::with_capacity(fused.len());
     let mut visibility = Vec::with_capacity(fused.len());
+    let mut thin_organ = Vec::with_capacity(fused.len());
     for (k, position) in fused.positions_world.iter().enumerate() {
         let observations: Vec<(u32, nalgebra::Point2<f64>)> = fused.views[k]
             .iter()
@@ -459,6 +470,7 @@ pub fn dense_model(
             });
         }
         visibility.push(observations.iter().map(|(v, _)| *v).collect());
+        thin_organ.push(fused.thin_organ.get(k).copied().unwrap_or(false));
         points.push(Point3D {
             id,
             position_world: *position,
@@ -475,11 +487,16 @@ pub fn dense_model(
         model.frames().to_vec(),
     )
     .map_err(|e| MvsError::NoDepth(format!("the fused model is inconsistent: {e}")))?;
-    Ok((dense, visibility))
+    Ok(DenseModel {
+        model: dense,
+        visibility,
+        thin_organ,
+    })
 }
 
-/// `fused.ply`: binary PLY with float positions and 8-bit colours.
-fn fused_ply(model: &Reconstruction) -> Vec<u8> {
+/// `fused.ply`: binary PLY with float positions, 8-bit colours and `thin_organ` (1: found by
+/// the thin-organ sweep, see [`DenseModel::thin_organ`]).
+fn fused_ply(model: &Reconstruction, thin_organ: &[bool]) -> Vec<u8> {
     let points = model.points();
     let coordinate =
         |axis: usize| -> Vec<f64> { points.iter().map(|p| p.position_world[axis]).collect() };
@@ -495,6 +512,13 @@ fn fused_ply(model: &Reconstruction) -> Vec<u8> {
                 Column::scalar("red", ScalarType::U8, channel(0)),
                 Column::scalar("green", ScalarType::U8, channel(1)),
                 Column::scalar("blue", ScalarType::U8, channel(2)),
+                Column::scalar(
+                    "thin_organ",
+                    ScalarType::U8,
+                    (0..points.len())
+                        .map(|k| f64::from(u8::from(thin_organ.get(k).copied().unwrap_or(false))))
+                        .collect(),
+                ),
             ],
         }],
         comments: vec!["frond densify: semi-dense points fused from pairwise stereo".to_owned()],
@@ -544,7 +568,11 @@ pub fn write_workspace(
     options: &DensifyOptions,
     out: &Path,
 ) -> Result<Reconstruction, MvsError> {
-    let (dense, visibility) = dense_model(&scene.reconstruction, fused)?;
+    let DenseModel {
+        model: dense,
+        visibility,
+        thin_organ,
+    } = dense_model(&scene.reconstruction, fused)?;
     let staging = StagedDir::new(out).map_err(|e| output_error(out, e))?;
     let root = staging.path();
     let sparse = root.join("sparse");
@@ -552,7 +580,8 @@ pub fn write_workspace(
     write_model(&sparse, &dense, ModelFormat::Binary)?;
     link_images(scene, &root.join("images"))?;
     let ply_path = root.join("fused.ply");
-    write_atomic(&ply_path, &fused_ply(&dense)).map_err(|e| output_error(&ply_path, e))?;
+    write_atomic(&ply_path, &fused_ply(&dense, &thin_organ))
+        .map_err(|e| output_error(&ply_path, e))?;
     let vis_path = root.join("fused.ply.vis");
     write_atomic(&vis_path, &fused_visibility(&visibility))
         .map_err(|e| output_error(&vis_path, e))?;

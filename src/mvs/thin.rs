@@ -806,6 +806,7 @@ fn select(points: FusedPoints, keep: &[bool]) -> FusedPoints {
             out.colors.push(points.colors[k]);
             out.views.push(points.views[k].clone());
             out.support.push(points.support[k]);
+            out.thin_organ.push(points.thin_organ[k]);
         }
     }
     out
@@ -844,6 +845,7 @@ fn merge(points: &[ThinPoint], voxel: f64) -> FusedPoints {
         fused.colors.push(color.map(|c| (c / n).round() as u8));
         fused.views.push(views);
         fused.support.push(members.len() as u32);
+        fused.thin_organ.push(true);
     }
     fused
 }

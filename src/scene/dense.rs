@@ -1,6 +1,8 @@
 //! COLMAP's fused dense point cloud: `fused.ply` (positions, normals, colours) and its
 //! visibility file `fused.ply.vis` (for each point, the images that see it, as positions in
-//! the dense workspace's image list, which is the file order of its sparse model).
+//! the dense workspace's image list, which is the file order of its sparse model). `frond
+//! densify` adds a vertex property `thin_organ` (1: a point its thin-organ sweep found on a
+//! stem's or petiole's centreline); COLMAP's files have none.
 
 use std::path::Path;
 
@@ -18,6 +20,9 @@ pub struct DensePoints {
     pub colors: Vec<[u8; 3]>,
     /// For each point, the ids of the images that see it (empty when no `.vis` file exists).
     pub visible_in: Vec<Vec<ImageId>>,
+    /// For each point, whether `frond densify`'s thin-organ sweep found it (empty when the
+    /// file has no `thin_organ` property).
+    pub thin_organ: Vec<bool>,
 }
 
 fn column<'a>(vertex: &'a Element, name: &str, path: &Path) -> SceneResult<&'a [f64]> {
@@ -94,6 +99,10 @@ pub fn read_fused(ply_path: &Path, model: &Reconstruction) -> SceneResult<DenseP
             .collect(),
         _ => vec![[200, 200, 200]; vertex.count],
     };
+    let thin_organ = vertex
+        .column("thin_organ")
+        .map(|c| c.values.iter().map(|&v| v > 0.0).collect())
+        .unwrap_or_default();
     let vis_path = ply_path.with_file_name(format!(
         "{}.vis",
         ply_path
@@ -112,6 +121,7 @@ pub fn read_fused(ply_path: &Path, model: &Reconstruction) -> SceneResult<DenseP
         normals_world,
         colors,
         visible_in,
+        thin_organ,
     })
 }
 

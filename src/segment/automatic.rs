@@ -771,6 +771,22 @@ impl LeafParts<'_> {
     }
 }
 
+/// Plant points the thin-organ sweep found ([`crate::mvs::thin`]) are stem candidates: the
+/// sweep only keeps points on a bar's centreline where stereo left the surface sparse, so they
+/// are stems and petioles (or a leaf's rim, which [`crate::segment::borders`] gives back),
+/// never a leaf's sheet. In the leaf graph they joined touching leaves and made extra leaf
+/// segments; as stem points they go to the skeleton. Photos of broadleaf seeds 1–5 and 11–13
+/// (the same points, reconstructed with and without this rule): mean petiole length recall
+/// 0.735 → 0.772, leaf precision 0.916 → 0.919, leaf recall unchanged; medium seeds 3–5: mean
+/// leaf recall 0.754 → 0.767, leaf precision 0.727 → 0.716, branch recall 0.344 → 0.343.
+fn thin_organs_are_stem_points(points: &PointSet, class: &mut [PointClass]) {
+    for (i, class) in class.iter_mut().enumerate() {
+        if *class == PointClass::Plant && points.is_thin_organ(i) {
+            *class = PointClass::Stem;
+        }
+    }
+}
+
 /// Runs the automatic segmentation on a scene's points.
 pub fn segment_scene(
     scene: &Scene,
@@ -795,6 +811,7 @@ pub fn segment_scene(
             foreground.class[i] = PointClass::Outlier;
         }
     }
+    thin_organs_are_stem_points(&points, &mut foreground.class);
     timings.foreground = clock.elapsed().as_secs_f64();
     let check_cancelled = || {
         if progress.is_cancelled() {
@@ -1121,7 +1138,31 @@ mod tests {
             views: vec![vec![0]; n],
             point_ids: (0..n as u64).collect(),
             id_kind: PointIds::default(),
+            thin_organ: Vec::new(),
         }
+    }
+
+    #[test]
+    fn plant_points_the_thin_organ_sweep_found_are_stem_candidates() {
+        let mut points = green_points(vec![Point3::origin(); 4]);
+        points.thin_organ = vec![false, true, true, true];
+        let mut class = vec![
+            PointClass::Plant,
+            PointClass::Plant,
+            PointClass::Floor,
+            PointClass::Stem,
+        ];
+        thin_organs_are_stem_points(&points, &mut class);
+        // Only plant points change: a sweep point on the floor stays floor.
+        assert_eq!(
+            class,
+            vec![
+                PointClass::Plant,
+                PointClass::Stem,
+                PointClass::Floor,
+                PointClass::Stem
+            ]
+        );
     }
 
     /// The plane z = 0.
