@@ -206,6 +206,7 @@ impl Session {
     fn snap_points(&self, view: Option<usize>) -> SnapPoints<'_> {
         let points = &self.segmentation.points;
         let mut candidates = crate::branch::plant::skeleton_point_indices(
+            &self.segmentation.points,
             &self.segmentation.foreground,
             &self.labels,
         );
