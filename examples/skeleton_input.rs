@@ -133,7 +133,8 @@ fn main() -> Result<()> {
         100.0 * thin.centerline_coverage,
         NEAR * 1e3
     );
-    let candidates = skeleton_point_indices(&segmentation.foreground, &labels);
+    let candidates =
+        skeleton_point_indices(&segmentation.points, &segmentation.foreground, &labels);
     let input = if args.iter().any(|a| a == "--all-candidates") {
         candidates
     } else {
