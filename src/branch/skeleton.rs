@@ -78,6 +78,9 @@ pub struct SkeletonStats {
     /// Side branches removed as the rims of leaves ([`super::prune`]).
     #[serde(default)]
     pub rims_pruned: usize,
+    /// Side branches removed as showing no bar in the photos ([`super::prune::BarTest`]).
+    #[serde(default)]
+    pub barless_pruned: usize,
 }
 
 /// Why no skeleton could be built.
