@@ -28,6 +28,13 @@
 //!    radius (half-width × depth / focal), so it lies on the surface the photos show, like the
 //!    window-stereo points. Points are merged on the fusion's voxel grid.
 //!
+//! Centreline curves shorter than an organ's ([`ThinOptions::min_curve_pixels`]) are texture
+//! as often as organs: a stem seen between leaves, a small leaf or leaflet, a blotch of the
+//! floor. On request ([`ThinOptions::min_short_curve_pixels`], `frond densify
+//! --thin-short-bars N`) they are swept too, and their points are kept without the thin-organ
+//! mark. Off by default: it doubles the sweep's seeds and time for small gains on broadleaf
+//! plants (see the README's *Short bars*).
+//!
 //! Deterministic; every view in parallel.
 
 use std::collections::BTreeMap;
@@ -60,6 +67,10 @@ pub struct ThinOptions {
     pub max_color_difference: f64,
     /// Centreline curves shorter than this (pixels) are texture, not organs.
     pub min_curve_pixels: usize,
+    /// Shorter curves of at least this many pixels are swept too, as *short bars*: a small
+    /// leaf or leaflet seen edge-on or narrow is a bar a few pixels long. Their points are
+    /// not marked as thin organs (0: short bars are not swept).
+    pub min_short_curve_pixels: usize,
 }
 
 impl Default for ThinOptions {
@@ -73,6 +84,7 @@ impl Default for ThinOptions {
             min_supporting: 3,
             max_color_difference: 40.0,
             min_curve_pixels: 15,
+            min_short_curve_pixels: 0,
         }
     }
 }
@@ -88,6 +100,8 @@ pub struct ThinStats {
     pub ambiguous: usize,
     /// Points after merging on the voxel grid.
     pub points: usize,
+    /// Of those, points of short bars (not marked as thin organs).
+    pub short_bar_points: usize,
 }
 
 /// One view's bars, on its loaded (possibly downsized) pixel grid.
@@ -290,6 +304,15 @@ impl BarMap {
     /// Centreline pixels: responses of at least `min_contrast` that are maxima across the bar,
     /// on connected curves of at least `min_length` pixels (texture gives short pieces).
     fn centreline(&self, min_contrast: f64, min_length: usize) -> Vec<usize> {
+        self.centreline_curves(min_contrast, min_length)
+            .into_iter()
+            .map(|(k, _)| k)
+            .collect()
+    }
+
+    /// Centreline pixels with the size (pixels) of the curve each lies on, for curves of at
+    /// least `min_length` pixels.
+    fn centreline_curves(&self, min_contrast: f64, min_length: usize) -> Vec<(usize, usize)> {
         let maxima = self.maxima(min_contrast);
         let mut on = vec![false; self.response.len()];
         for &k in &maxima {
@@ -324,7 +347,8 @@ impl BarMap {
         }
         maxima
             .into_iter()
-            .filter(|&k| sizes[&sets.find(k)] >= min_length)
+            .map(|k| (k, sizes[&sets.find(k)]))
+            .filter(|&(_, size)| size >= min_length)
             .collect()
     }
 
@@ -506,6 +530,7 @@ pub fn sweep(
     }
     let fused = without_isolated(merge(&points, voxel), voxel);
     stats.points = fused.len();
+    stats.short_bar_points = fused.thin_organ.iter().filter(|&&organ| !organ).count();
     Ok((fused, stats))
 }
 
@@ -514,6 +539,8 @@ struct ThinPoint {
     color: [u8; 3],
     /// Image positions of the view and its supporting views.
     views: Vec<u32>,
+    /// On a curve long enough for an organ (else a short bar).
+    thin_organ: bool,
 }
 
 fn neighbours_of(views: &[SweepView], v: usize, options: &ThinOptions) -> Vec<usize> {
@@ -554,11 +581,16 @@ fn sweep_view(
     }
     // One seed per 2 × 2 pixel cell: the points are merged a voxel of 1.5 pixels wide anyway.
     let mut taken = std::collections::HashSet::new();
-    let seeds: Vec<usize> = view
+    let shortest = match options.min_short_curve_pixels {
+        0 => options.min_curve_pixels,
+        short => short.min(options.min_curve_pixels),
+    };
+    let seeds: Vec<(usize, bool)> = view
         .bars
-        .centreline(options.min_contrast, options.min_curve_pixels)
+        .centreline_curves(options.min_contrast, shortest)
         .into_iter()
-        .filter(|&k| taken.insert(((k % view.bars.width) / 2, (k / view.bars.width) / 2)))
+        .filter(|&(k, _)| taken.insert(((k % view.bars.width) / 2, (k / view.bars.width) / 2)))
+        .map(|(k, size)| (k, size >= options.min_curve_pixels))
         .collect();
     stats.seeds = seeds.len();
     // This view's centre in each neighbour's camera frame: a point at depth z on a ray is then
@@ -571,7 +603,7 @@ fn sweep_view(
     let focal = view.camera.mean_focal() * 0.5 * (view.scale.0 + view.scale.1);
     let max_color = options.max_color_difference as f32;
     let mut scores: Vec<u8> = Vec::new();
-    for k in seeds {
+    for (k, organ) in seeds {
         let (i, j) = (k % view.bars.width, k / view.bars.width);
         let Some(direction) = view.ray(i as f64, j as f64) else {
             continue;
@@ -720,6 +752,7 @@ fn sweep_view(
                 color[2].round().clamp(0.0, 255.0) as u8,
             ],
             views: seen,
+            thin_organ: organ,
         });
     }
     (stats, out)
@@ -795,6 +828,7 @@ pub fn where_stereo_is_sparse(
         .collect();
     let kept = select(thin, &keep);
     stats.points = kept.len();
+    stats.short_bar_points = kept.thin_organ.iter().filter(|&&organ| !organ).count();
     (kept, stats)
 }
 
@@ -845,7 +879,9 @@ fn merge(points: &[ThinPoint], voxel: f64) -> FusedPoints {
         fused.colors.push(color.map(|c| (c / n).round() as u8));
         fused.views.push(views);
         fused.support.push(members.len() as u32);
-        fused.thin_organ.push(true);
+        // A voxel is an organ's where most of its samples are.
+        let organ = members.iter().filter(|&&k| points[k].thin_organ).count();
+        fused.thin_organ.push(2 * organ >= members.len());
     }
     fused
 }
@@ -988,17 +1024,53 @@ mod tests {
     }
 
     #[test]
+    fn a_short_bar_is_a_curve_of_its_own_length() {
+        // A dark bar 3 pixels wide and 9 long (a small leaf), and a long one (a stem).
+        let (w, h) = (60, 60);
+        let mut rgb = vec![[120u8, 110, 100]; w * h];
+        for j in 5..55 {
+            for i in 9..12 {
+                rgb[j * w + i] = [30, 60, 30];
+            }
+        }
+        for j in 26..35 {
+            for i in 39..42 {
+                rgb[j * w + i] = [30, 60, 30];
+            }
+        }
+        let bars = BarMap::from_rgb(&rgb, w, h, 14.0);
+        let options = ThinOptions::default();
+        let column = |k: usize| k % w;
+        let organ = bars.centreline(options.min_contrast, options.min_curve_pixels);
+        assert!(
+            organ.iter().all(|&k| column(k) < 20),
+            "only the long bar is an organ"
+        );
+        assert!(organ.len() >= 40, "{}", organ.len());
+        let curves = bars.centreline_curves(options.min_contrast, 4);
+        let short: Vec<&(usize, usize)> = curves.iter().filter(|(k, _)| column(*k) > 30).collect();
+        assert!(!short.is_empty(), "the short bar is a curve");
+        for &&(k, size) in &short {
+            assert_eq!(column(k), 40);
+            assert!((4..options.min_curve_pixels).contains(&size), "{size}");
+        }
+    }
+
+    #[test]
     fn merge_averages_within_a_voxel() {
         let point = |x: f64, view: u32| ThinPoint {
             position_world: Point3::new(x, 0.05, 0.05),
             color: [10, 20, 30],
             views: vec![view],
+            thin_organ: view != 3,
         };
         let fused = merge(&[point(0.01, 1), point(0.03, 2), point(0.25, 3)], 0.1);
         assert_eq!(fused.len(), 2);
         assert!((fused.positions_world[0].x - 0.02).abs() < 1e-12);
         assert_eq!(fused.views[0], vec![1, 2]);
         assert_eq!(fused.support, vec![2, 1]);
+        // A short bar's voxel is not an organ's.
+        assert_eq!(fused.thin_organ, vec![true, false]);
         assert!(merge(&[point(0.0, 1)], 0.0).is_empty());
     }
 }
