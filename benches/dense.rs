@@ -2,7 +2,7 @@
 //! 2-core machine). A 36-view 800×600 broadleaf with sparse-like points (true poses); the full
 //! `densify` beside its two halves measured in the same run: the depth maps alone
 //! (rectification + semi-global matching, the baseline every pairwise-stereo method pays) and
-//! the fusion alone on those maps.
+//! the fusion alone on those maps, and the full `densify` with the short-bar option.
 
 use std::hint::black_box;
 
@@ -30,6 +30,12 @@ fn dense(c: &mut Criterion) {
     group.sample_size(10);
     group.bench_function("full", |b| {
         b.iter(|| black_box(densify(&scene, &densify_options, &NoProgress).expect("densify")))
+    });
+    // The short-bar option (`--thin-short-bars 4`) against the default in the same run.
+    let mut short_bars = densify_options;
+    short_bars.thin.min_short_curve_pixels = 4;
+    group.bench_function("full_short_bars_4", |b| {
+        b.iter(|| black_box(densify(&scene, &short_bars, &NoProgress).expect("densify")))
     });
     group.bench_function("depth_maps_only", |b| {
         b.iter(|| black_box(depth_maps(&scene, &densify_options, &NoProgress).expect("maps")))
