@@ -1,0 +1,185 @@
+//! Tuning aid: where a leaf's area is lost from photos. For each ground-truth leaf matched to a
+//! predicted segment, the share of the true leaf surface (its surface samples) that has, within
+//! `r` (1 % of the leaf's length or two point spacings, whichever is larger): any reconstructed point, a point of the matched
+//! segment, a point of another leaf segment, and the fitted mesh. Losses at "points" are the
+//! stereo step's; between "points" and "segment" the segmentation's; between "segment" and
+//! "mesh" the fit's.
+//! Usage: `cargo run --release --example leaf_coverage -- DATASET RECONSTRUCTION [PRED_MODEL]`.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use frond::eval::geometry::distance_to_mesh;
+use frond::eval::{EvalOptions, GroundTruth, Prediction, align_to_ground_truth, evaluate};
+use frond::graph::neighbours::Neighbours;
+use frond::scene::read_model;
+use nalgebra::Point3;
+
+/// A true leaf sample is covered by what lies within this share of the leaf's length...
+const COVER_LENGTH_SHARE: f64 = 0.01;
+/// ...or within this many point spacings, whichever is larger.
+const COVER_SPACINGS: f64 = 2.0;
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().collect();
+    let gt_root = Path::new(args.get(1).context("dataset")?);
+    let out = Path::new(args.get(2).context("reconstruction folder")?);
+    let truth = GroundTruth::load(gt_root)?;
+    let mut pred = Prediction::load(out)?;
+    if let Some(model) = args.get(3) {
+        let (similarity, _) = align_to_ground_truth(gt_root, Path::new(model))?;
+        pred.transform(&similarity);
+    }
+    let report = evaluate(&truth, &pred, None, &EvalOptions::default())?;
+    // The GT views and their leaf masks (leaf id + 1 per pixel), to count the views that see
+    // a surface sample unoccluded.
+    let (gt_model, _) = read_model(&gt_root.join("sparse/0"))?;
+    let mut masks = Vec::new();
+    for image in gt_model.images() {
+        let stem = Path::new(&image.name)
+            .file_stem()
+            .context("image name")?
+            .to_string_lossy()
+            .to_string();
+        let path = gt_root.join("gt/masks").join(format!("{stem}.png"));
+        let mask = image::open(&path)
+            .with_context(|| format!("{}", path.display()))?
+            .into_luma16();
+        masks.push((image, mask));
+    }
+    let views_seeing = |p: &Point3<f64>, leaf: i64| -> usize {
+        masks
+            .iter()
+            .filter(|(image, mask)| {
+                gt_model.project(image, p).is_some_and(|uv| {
+                    let (x, y) = (uv.x.floor(), uv.y.floor());
+                    x >= 0.0
+                        && y >= 0.0
+                        && (x as u32) < mask.width()
+                        && (y as u32) < mask.height()
+                        && mask.get_pixel(x as u32, y as u32).0[0] as i64 == leaf + 1
+                })
+            })
+            .count()
+    };
+    let all = Neighbours::new(pred.points.positions.iter().copied())?;
+    // The reconstructed points' spacing (median distance to the nearest other point): a
+    // sample nearer a point than two spacings is as covered as the sampling allows.
+    let mut gaps: Vec<f64> = (0..all.len())
+        .step_by(17)
+        .filter_map(|i| {
+            all.nearest_k(&all.point(i), std::num::NonZero::new(2)?)
+                .get(1)
+                .map(|n| n.distance())
+        })
+        .collect();
+    gaps.sort_by(f64::total_cmp);
+    let spacing = gaps.get(gaps.len() / 2).copied().unwrap_or(0.0);
+    println!("point spacing {:.2} mm", spacing * 1e3);
+    let mut by_segment: BTreeMap<i64, Vec<Point3<f64>>> = BTreeMap::new();
+    for (p, &l) in pred.points.positions.iter().zip(&pred.points.leaf_ids) {
+        if l >= 0 {
+            by_segment.entry(l).or_default().push(*p);
+        }
+    }
+    let trees: BTreeMap<i64, Neighbours> = by_segment
+        .into_iter()
+        .filter_map(|(l, ps)| Neighbours::new(ps).ok().map(|t| (l, t)))
+        .collect();
+    println!("gt  seg  samples  seen>=2  points  segment  other  mesh  area_ratio");
+    let mut sums = [0.0f64; 5];
+    let mut count = 0usize;
+    for m in &report.leaves.matches {
+        let Some((record, _)) = truth.leaves.iter().find(|(r, _)| r.id as i64 == m.gt_leaf) else {
+            continue;
+        };
+        let r = (COVER_LENGTH_SHARE * record.length).max(COVER_SPACINGS * spacing);
+        let samples: Vec<Point3<f64>> = truth
+            .surface_samples
+            .positions
+            .iter()
+            .zip(&truth.surface_samples.leaf_ids)
+            .filter(|&(_, &l)| l == m.gt_leaf)
+            .map(|(p, _)| *p)
+            .collect();
+        if samples.is_empty() {
+            continue;
+        }
+        let mesh = pred.leaf_meshes.get(&m.segment);
+        let spheres: Vec<(Point3<f32>, f32)> = mesh
+            .map(|mesh| {
+                (0..mesh.triangles.len())
+                    .map(|t| {
+                        let [a, b, c] = mesh.corners(t);
+                        let centre = Point3::from((a.coords + b.coords + c.coords) / 3.0);
+                        let radius = [a, b, c]
+                            .iter()
+                            .map(|p| (p - centre).norm())
+                            .fold(0.0, f32::max);
+                        (centre, radius)
+                    })
+                    .collect()
+            })
+            .unwrap_or_default();
+        let near =
+            |tree: &Neighbours, p: &Point3<f64>| tree.nearest(p).is_some_and(|n| n.distance() <= r);
+        let mut hits = [0usize; 5];
+        let mut views = Vec::with_capacity(samples.len());
+        for p in &samples {
+            let v = views_seeing(p, m.gt_leaf);
+            views.push(v);
+            if v >= 2 {
+                hits[4] += 1;
+            }
+            if near(&all, p) {
+                hits[0] += 1;
+            }
+            if trees.get(&m.segment).is_some_and(|t| near(t, p)) {
+                hits[1] += 1;
+            }
+            if trees.iter().any(|(&l, t)| l != m.segment && near(t, p)) {
+                hits[2] += 1;
+            }
+            if let Some(mesh) = mesh
+                && (distance_to_mesh(&p.cast::<f32>(), mesh, &spheres) as f64) <= r
+            {
+                hits[3] += 1;
+            }
+        }
+        views.sort_unstable();
+        let n = samples.len() as f64;
+        let f: Vec<f64> = hits.iter().map(|&h| h as f64 / n).collect();
+        let ratio = mesh.map_or(0.0, |mesh| mesh.area() / record.area);
+        println!(
+            "{:>3} {:>4} {:>8} {:>8.3} {:>7.3} {:>8.3} {:>6.3} {:>5.3} {:>11.3}  views p10/p50 {}/{}",
+            m.gt_leaf,
+            m.segment,
+            samples.len(),
+            f[4],
+            f[0],
+            f[1],
+            f[2],
+            f[3],
+            ratio,
+            views[views.len() / 10],
+            views[views.len() / 2]
+        );
+        for (s, v) in sums.iter_mut().zip(&f) {
+            *s += v;
+        }
+        count += 1;
+    }
+    if count > 0 {
+        let c = count as f64;
+        println!(
+            "mean: seen>=2 {:.3} points {:.3} segment {:.3} other {:.3} mesh {:.3} ({count} leaves)",
+            sums[4] / c,
+            sums[0] / c,
+            sums[1] / c,
+            sums[2] / c,
+            sums[3] / c
+        );
+    }
+    Ok(())
+}
