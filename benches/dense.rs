@@ -2,7 +2,8 @@
 //! 2-core machine). A 36-view 800×600 broadleaf with sparse-like points (true poses); the full
 //! `densify` beside its two halves measured in the same run: the depth maps alone
 //! (rectification + semi-global matching, the baseline every pairwise-stereo method pays) and
-//! the fusion alone on those maps, and the full `densify` with the short-bar option.
+//! the fusion alone on those maps, and the full `densify` with the short-bar option and with
+//! two stereo partners per view.
 
 use std::hint::black_box;
 
@@ -36,6 +37,13 @@ fn dense(c: &mut Criterion) {
     short_bars.thin.min_short_curve_pixels = 4;
     group.bench_function("full_short_bars_4", |b| {
         b.iter(|| black_box(densify(&scene, &short_bars, &NoProgress).expect("densify")))
+    });
+    // Two stereo partners per view (`--partners 2`: leaves sampled more completely, see the
+    // README's trait accuracy) against the default in the same run.
+    let mut two_partners = densify_options;
+    two_partners.pairs.partners_per_view = 2;
+    group.bench_function("full_partners_2", |b| {
+        b.iter(|| black_box(densify(&scene, &two_partners, &NoProgress).expect("densify")))
     });
     group.bench_function("depth_maps_only", |b| {
         b.iter(|| black_box(depth_maps(&scene, &densify_options, &NoProgress).expect("maps")))

@@ -739,7 +739,9 @@ struct DensifyArgs {
     /// larger is smoother on weak texture).
     #[arg(long, default_value_t = 5)]
     block_size: i32,
-    /// Stereo partners per view (each gives the view one depth map).
+    /// Stereo partners per view (each gives the view one depth map). 2 covers weakly
+    /// textured leaves more completely (better leaf area and length) but adds points along
+    /// leaf rims that the skeleton draws as branches (see the README's "Two stereo partners").
     #[arg(long, default_value_t = 1)]
     partners: usize,
     /// Other depth maps that must agree with a depth for it to be kept.

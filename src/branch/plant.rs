@@ -290,7 +290,13 @@ pub fn automatic_plant_skeleton(
         .filter(|&i| on_leaf_sheet(&segmentation.foreground, labels, i))
         .map(|i| (positions[i], labels.segment_of[i].max(0) as u32))
         .collect();
-    stats.rims_pruned = remove_leaf_rims(&mut tree, &sheets, stats.spacing, &options.rims);
+    stats.rims_pruned = remove_leaf_rims(
+        &mut tree,
+        &sheets,
+        &input.points,
+        stats.spacing,
+        &options.rims,
+    );
     stats.barless_pruned = remove_barless_ends(
         &mut tree,
         &input.points,

@@ -3,6 +3,9 @@
 //! and the skeleton follows them like any other points. A branch is such a rim when nearly all
 //! of its axis lies within its radius plus a few point spacings of one and the same leaf's
 //! sheet: a petiole meets its leaf at one end, a stem passes many leaves, a rim follows one.
+//! Where the skeleton bridged a gap to reach the rim (a straight run with no points), the rim
+//! is judged by the part of its axis the points support: a bridge shows nothing of what the
+//! branch is.
 //!
 //! Side branches the photos show no bar along ([`BarTest`]): where the points say which ones
 //! `frond densify`'s thin-organ sweep found, a petiole's points are such points at about the
@@ -27,6 +30,9 @@ pub struct RimTest {
     pub min_leaf_share: f64,
     /// Near a leaf: within the branch's radius plus this many point spacings of its sheet.
     pub reach_spacings: f64,
+    /// Supported by the points: a skeleton point within the branch's radius plus this many
+    /// point spacings (as [`crate::branch::plant::plant_branch_support`] measures support).
+    pub support_spacings: f64,
 }
 
 impl Default for RimTest {
@@ -34,6 +40,7 @@ impl Default for RimTest {
         Self {
             min_leaf_share: 0.9,
             reach_spacings: 3.0,
+            support_spacings: 2.0,
         }
     }
 }
@@ -57,11 +64,19 @@ fn axis_samples(cylinder: &GeneralizedCylinder, spacing: f64) -> Vec<(Point3<f64
         .collect()
 }
 
+/// Fewest axis samples the points must support before a branch is judged by its supported
+/// part alone (see [`one_leaf_shares`]).
+const MIN_SUPPORTED_SAMPLES: usize = 8;
+
 /// For each branch of `tree`, in its order, the largest share of its axis samples (about one
-/// per `spacing`, the skeleton points' median spacing) near one leaf's sheet.
+/// per `spacing`, the skeleton points' median spacing) near one leaf's sheet. With the
+/// skeleton's points (`support`), the larger of that share over the whole axis and over the
+/// samples the points support (a skeleton point within the radius plus
+/// [`RimTest::support_spacings`]), when at least [`MIN_SUPPORTED_SAMPLES`] are.
 pub fn one_leaf_shares(
     tree: &BranchTree,
     leaves: &LeafSheets,
+    support: Option<&Neighbours>,
     spacing: f64,
     test: &RimTest,
 ) -> Vec<f64> {
@@ -70,16 +85,35 @@ pub fn one_leaf_shares(
         .map(|branch| {
             let samples = axis_samples(&branch.cylinder, spacing);
             let mut near: HashMap<u32, usize> = HashMap::new();
+            let mut near_supported: HashMap<u32, usize> = HashMap::new();
+            let mut supported = 0usize;
             for (point, radius) in &samples {
+                let seen = support.is_some_and(|points| {
+                    points.nearest(point).is_some_and(|found| {
+                        found.distance() <= radius + test.support_spacings * spacing
+                    })
+                });
+                supported += usize::from(seen);
                 let reach = radius + test.reach_spacings * spacing;
                 if let Some(found) = leaves.points.nearest(point)
                     && found.distance() <= reach
                     && let Some(&leaf) = leaves.leaf_of_point.get(found.index)
                 {
                     *near.entry(leaf).or_default() += 1;
+                    if seen {
+                        *near_supported.entry(leaf).or_default() += 1;
+                    }
                 }
             }
-            near.values().copied().max().unwrap_or(0) as f64 / samples.len().max(1) as f64
+            let share = |counts: &HashMap<u32, usize>, of: usize| {
+                counts.values().copied().max().unwrap_or(0) as f64 / of.max(1) as f64
+            };
+            let whole = share(&near, samples.len());
+            if supported >= MIN_SUPPORTED_SAMPLES {
+                whole.max(share(&near_supported, supported))
+            } else {
+                whole
+            }
         })
         .collect()
 }
@@ -247,11 +281,13 @@ pub fn remove_barless_ends(
 }
 
 /// The rims of leaves among `tree`'s side branches, removed ([`one_leaf_shares`],
-/// [`prune_rims`]); `sheets` are the points of leaf sheets with their leaves. Returns how many
-/// branches were removed.
+/// [`prune_rims`]); `sheets` are the points of leaf sheets with their leaves,
+/// `skeleton_points` the points the skeleton was built from. Returns how many branches were
+/// removed.
 pub fn remove_leaf_rims(
     tree: &mut BranchTree,
     sheets: &[(Point3<f64>, u32)],
+    skeleton_points: &[Point3<f64>],
     spacing: f64,
     test: &RimTest,
 ) -> usize {
@@ -266,7 +302,8 @@ pub fn remove_leaf_rims(
         points: &points,
         leaf_of_point: &leaf_of_point,
     };
-    let shares = one_leaf_shares(tree, &leaves, spacing, test);
+    let support = Neighbours::new(skeleton_points.iter().copied()).ok();
+    let shares = one_leaf_shares(tree, &leaves, support.as_ref(), spacing, test);
     prune_rims(tree, &shares, test)
 }
 
@@ -335,14 +372,17 @@ mod tests {
             leaf_of_point: &leaf_of_point,
         };
         let test = RimTest::default();
-        let shares = one_leaf_shares(&tree, &leaves, SPACING, &test);
+        let shares = one_leaf_shares(&tree, &leaves, None, SPACING, &test);
         // The stem is near some leaf all along, but near each one along about half of it.
         assert!(shares[0] > 0.4 && shares[0] < 0.7, "{shares:?}");
         assert!(shares[1] < 0.2, "{shares:?}");
         assert!(shares[2] > 0.95 && shares[3] > 0.95, "{shares:?}");
 
         let mut pruned = tree.clone();
-        assert_eq!(remove_leaf_rims(&mut pruned, &sheets, SPACING, &test), 1);
+        assert_eq!(
+            remove_leaf_rims(&mut pruned, &sheets, &[], SPACING, &test),
+            1
+        );
         let kept: Vec<u32> = pruned.branches.iter().map(|b| b.id).collect();
         assert_eq!(kept, vec![0, 1, 3, 4]);
 
@@ -359,7 +399,74 @@ mod tests {
         let mut stem = tree.clone();
         assert_eq!(prune_rims(&mut stem, &[1.0; 5], &test), 4);
         assert_eq!(stem.branches.len(), 1);
-        assert_eq!(remove_leaf_rims(&mut tree.clone(), &[], SPACING, &test), 0);
+        assert_eq!(
+            remove_leaf_rims(&mut tree.clone(), &[], &[], SPACING, &test),
+            0
+        );
+    }
+
+    #[test]
+    fn a_rim_reached_by_a_bridge_is_judged_by_its_supported_part() {
+        // Branch 1 leaves the stem as a straight bridge with no points and then follows leaf
+        // 20's edge; petiole 2 is seen only over its last 30 mm, up to leaf 21's base.
+        let rim_path: Vec<Point3<f64>> = std::iter::once(Point3::new(0.0, 0.0, 0.06))
+            .chain((0..=10).map(|k| Point3::new(0.1 + 0.01 * k as f64, 0.031, 0.1)))
+            .collect();
+        let tree = BranchTree {
+            branches: vec![
+                branch(0, None, [0.0, 0.0, 0.0], [0.0, 0.0, 0.12], 0.004),
+                Branch {
+                    id: 1,
+                    parent: Some(0),
+                    parent_fraction: 0.5,
+                    cylinder: GeneralizedCylinder::new(
+                        Spline::new(rim_path).unwrap(),
+                        0.002,
+                        0.002,
+                    ),
+                    leaf_at_tip: false,
+                },
+                branch(2, Some(0), [0.0, 0.0, 0.1], [-0.1, 0.0, 0.2], 0.002),
+            ],
+        };
+        let mut sheets = leaf((0.1, 0.2), (-0.03, 0.03), 0.1, 20);
+        sheets.extend(leaf((-0.2, -0.1), (-0.03, 0.03), 0.2, 21));
+        let mut skeleton_points = line([0.0, 0.0, 0.0], [0.0, 0.0, 0.12], 0).0;
+        skeleton_points.extend(line([0.1, 0.031, 0.1], [0.2, 0.031, 0.1], 0).0);
+        let petiole_seen = 0.03 / 0.1f64.hypot(0.1);
+        skeleton_points.extend(
+            line(
+                [-0.1 * (1.0 - petiole_seen), 0.0, 0.2 - 0.1 * petiole_seen],
+                [-0.1, 0.0, 0.2],
+                0,
+            )
+            .0,
+        );
+        let points = Neighbours::new(sheets.iter().map(|(p, _)| *p)).unwrap();
+        let leaf_of_point: Vec<u32> = sheets.iter().map(|(_, id)| *id).collect();
+        let leaves = LeafSheets {
+            points: &points,
+            leaf_of_point: &leaf_of_point,
+        };
+        let test = RimTest::default();
+        let whole = one_leaf_shares(&tree, &leaves, None, SPACING, &test);
+        assert!(whole[1] > 0.3 && whole[1] < 0.7, "{whole:?}");
+        let support = Neighbours::new(skeleton_points.iter().copied()).unwrap();
+        let supported = one_leaf_shares(&tree, &leaves, Some(&support), SPACING, &test);
+        assert!(supported[1] > 0.95, "{supported:?}");
+        assert!(supported[2] < 0.5, "{supported:?}");
+        // Without the skeleton's points the bridged rim stays; with them it goes, alone.
+        assert_eq!(
+            remove_leaf_rims(&mut tree.clone(), &sheets, &[], SPACING, &test),
+            0
+        );
+        let mut pruned = tree.clone();
+        assert_eq!(
+            remove_leaf_rims(&mut pruned, &sheets, &skeleton_points, SPACING, &test),
+            1
+        );
+        let kept: Vec<u32> = pruned.branches.iter().map(|b| b.id).collect();
+        assert_eq!(kept, vec![0, 2]);
     }
 
     #[test]
