@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use frond::eval::geometry::distance_to_mesh;
+use frond::eval::geometry::{bounding_spheres, distance_to_mesh};
 use frond::eval::{EvalOptions, GroundTruth, Prediction, align_to_ground_truth, evaluate};
 use frond::graph::neighbours::Neighbours;
 use frond::scene::read_model;
@@ -107,21 +107,7 @@ fn main() -> Result<()> {
             continue;
         }
         let mesh = pred.leaf_meshes.get(&m.segment);
-        let spheres: Vec<(Point3<f32>, f32)> = mesh
-            .map(|mesh| {
-                (0..mesh.triangles.len())
-                    .map(|t| {
-                        let [a, b, c] = mesh.corners(t);
-                        let centre = Point3::from((a.coords + b.coords + c.coords) / 3.0);
-                        let radius = [a, b, c]
-                            .iter()
-                            .map(|p| (p - centre).norm())
-                            .fold(0.0, f32::max);
-                        (centre, radius)
-                    })
-                    .collect()
-            })
-            .unwrap_or_default();
+        let spheres = mesh.map(bounding_spheres).unwrap_or_default();
         let near =
             |tree: &Neighbours, p: &Point3<f64>| tree.nearest(p).is_some_and(|n| n.distance() <= r);
         let mut hits = [0usize; 5];

@@ -25,7 +25,9 @@ pub fn distance_to_mesh(p: &Point3<f32>, mesh: &TriMesh, spheres: &[(Point3<f32>
     best
 }
 
-pub(crate) fn bounding_spheres(mesh: &TriMesh) -> Vec<(Point3<f32>, f32)> {
+/// Per triangle of `mesh`: its centroid and the radius of the sphere about it holding the
+/// triangle (the cull of [`distance_to_mesh`]).
+pub fn bounding_spheres(mesh: &TriMesh) -> Vec<(Point3<f32>, f32)> {
     (0..mesh.triangles.len())
         .map(|t| {
             let [a, b, c] = mesh.corners(t);
