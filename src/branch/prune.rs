@@ -340,6 +340,21 @@ mod tests {
             .collect()
     }
 
+    /// [`one_leaf_shares`] of `tree` against `sheets` under the default [`RimTest`].
+    fn rim_shares(
+        tree: &BranchTree,
+        sheets: &[(Point3<f64>, u32)],
+        support: Option<&Neighbours>,
+    ) -> Vec<f64> {
+        let points = Neighbours::new(sheets.iter().map(|(p, _)| *p)).unwrap();
+        let leaf_of_point: Vec<u32> = sheets.iter().map(|(_, id)| *id).collect();
+        let leaves = LeafSheets {
+            points: &points,
+            leaf_of_point: &leaf_of_point,
+        };
+        one_leaf_shares(tree, &leaves, support, SPACING, &RimTest::default())
+    }
+
     #[test]
     fn a_rim_along_one_leaf_is_pruned_and_a_petiole_or_a_stem_among_leaves_is_not() {
         // Stem 0 rises past leaves 10 and 11 (on either side, one after the other); petiole 1
@@ -365,14 +380,8 @@ mod tests {
         sheets.extend(upright((-0.05, -0.005), (0.05, 0.1), 11));
         sheets.extend(leaf((0.1, 0.2), (-0.03, 0.03), 0.15, 12));
         sheets.extend(leaf((-0.1, -0.003), (-0.03, 0.03), 0.05, 13));
-        let points = Neighbours::new(sheets.iter().map(|(p, _)| *p)).unwrap();
-        let leaf_of_point: Vec<u32> = sheets.iter().map(|(_, id)| *id).collect();
-        let leaves = LeafSheets {
-            points: &points,
-            leaf_of_point: &leaf_of_point,
-        };
         let test = RimTest::default();
-        let shares = one_leaf_shares(&tree, &leaves, None, SPACING, &test);
+        let shares = rim_shares(&tree, &sheets, None);
         // The stem is near some leaf all along, but near each one along about half of it.
         assert!(shares[0] > 0.4 && shares[0] < 0.7, "{shares:?}");
         assert!(shares[1] < 0.2, "{shares:?}");
@@ -442,17 +451,11 @@ mod tests {
             )
             .0,
         );
-        let points = Neighbours::new(sheets.iter().map(|(p, _)| *p)).unwrap();
-        let leaf_of_point: Vec<u32> = sheets.iter().map(|(_, id)| *id).collect();
-        let leaves = LeafSheets {
-            points: &points,
-            leaf_of_point: &leaf_of_point,
-        };
         let test = RimTest::default();
-        let whole = one_leaf_shares(&tree, &leaves, None, SPACING, &test);
+        let whole = rim_shares(&tree, &sheets, None);
         assert!(whole[1] > 0.3 && whole[1] < 0.7, "{whole:?}");
         let support = Neighbours::new(skeleton_points.iter().copied()).unwrap();
-        let supported = one_leaf_shares(&tree, &leaves, Some(&support), SPACING, &test);
+        let supported = rim_shares(&tree, &sheets, Some(&support));
         assert!(supported[1] > 0.95, "{supported:?}");
         assert!(supported[2] < 0.5, "{supported:?}");
         // Without the skeleton's points the bridged rim stays; with them it goes, alone.
