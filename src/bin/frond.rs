@@ -129,8 +129,10 @@ enum Command {
         out: PathBuf,
         #[command(flatten)]
         params: SegmentArgs,
-        /// Leaf fitting: `full` (flat fit, boundary warp, deformation), `no-warp` (no affine
-        /// ICP to the image boundary) or `flat` (PCA plane and scaling only).
+        /// Leaf fitting: `full` (flat fit, boundary warp, deformation), `one-view` (full, but
+        /// each leaf's image region from its chosen view alone, not widened by what the other
+        /// views confirm), `no-warp` (no affine ICP to the image boundary) or `flat` (PCA
+        /// plane and scaling only).
         #[arg(long, value_enum, default_value = "full")]
         fit: FitMode,
         /// The generic leaf: `SEGMENT` (its best view) or `SEGMENT:IMAGE_ID` (a COLMAP image
@@ -739,6 +741,16 @@ struct DensifyArgs {
     /// larger is smoother on weak texture).
     #[arg(long, default_value_t = 5)]
     block_size: i32,
+    /// Semi-global matching: connected disparity regions smaller than this many pixels are
+    /// removed as speckles (0: keep all; small leaves seen a few pixels wide need less than
+    /// the default).
+    #[arg(long, default_value_t = 100)]
+    speckle_window: i32,
+    /// Semi-global matching: the best matching cost must beat the second best by this
+    /// percentage (lower keeps more depths on weakly textured leaves, for the multi-view
+    /// consistency check to sort out).
+    #[arg(long, default_value_t = 10)]
+    uniqueness: i32,
     /// Stereo partners per view (each gives the view one depth map). 2 covers weakly
     /// textured leaves more completely (better leaf area and length) but adds points along
     /// leaf rims that the skeleton draws as branches (see the README's "Two stereo partners").
@@ -797,6 +809,14 @@ impl DensifyArgs {
             bail!("--block-size must be odd, 1 to 21");
         }
         options.stereo.block_size = self.block_size;
+        if self.speckle_window < 0 {
+            bail!("--speckle-window must be 0 or more");
+        }
+        options.stereo.speckle_window = self.speckle_window;
+        if !(0..=100).contains(&self.uniqueness) {
+            bail!("--uniqueness must be 0 to 100");
+        }
+        options.stereo.uniqueness_ratio = self.uniqueness;
         options.fusion.min_consistent = self.min_consistent;
         options.fusion.max_relative_depth_error = self.max_depth_error;
         options.fusion.pixel_step = self.pixel_step;
@@ -1029,6 +1049,7 @@ struct SceneArgs {
 #[derive(Clone, Copy, ValueEnum)]
 enum FitMode {
     Full,
+    OneView,
     NoWarp,
     Flat,
 }
@@ -1327,6 +1348,7 @@ fn reconstruct(
     };
     match fit {
         FitMode::Full => {}
+        FitMode::OneView => options.leaves.votes.enabled = false,
         FitMode::NoWarp => options.leaves.fit.use_boundary = false,
         FitMode::Flat => {
             options.leaves.fit.use_boundary = false;

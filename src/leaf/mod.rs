@@ -8,6 +8,7 @@
 //! collects the leaves, the boundaries it computed, and the segments that could not be posed
 //! (with the reason) for the branch stage.
 
+pub mod extent;
 pub mod fit;
 pub mod template;
 
@@ -56,6 +57,9 @@ pub struct TemplateSource {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct LeafOptions {
     pub fit: LeafFitOptions,
+    /// Widening each leaf's image region by what the other views confirm.
+    #[serde(default)]
+    pub votes: extent::ViewVoteOptions,
     /// The user's sample leaf; `None` chooses one automatically.
     pub template: Option<TemplatePick>,
 }
@@ -371,6 +375,70 @@ pub struct BoundaryChoices {
     pub unusable_views: Vec<UnusableView>,
 }
 
+/// Widens a leaf's chosen region (`region`: its view, plane polygon and image boundary) by
+/// what its view's wide region (`wide`: one per candidate view, under
+/// [`extent::ViewVoteOptions`]' weaker spatial prior, on the same plane) adds and a majority
+/// of the other views confirm: see [`extent`]. Left as it is with fewer than
+/// [`extent::ViewVoteOptions::min_views`] wide regions, when the chosen region is not on the
+/// plane, when its view has no wide region, or when the vote does not grow it.
+fn widen_by_votes(
+    scene: &Scene,
+    frame: &fit::LeafFrame,
+    region: &mut (usize, Vec<Point2<f64>>, Boundary),
+    wide: &[(usize, Vec<Point2<f64>>)],
+    options: &extent::ViewVoteOptions,
+) {
+    let view = region.0;
+    let Some(own) = wide.iter().find(|r| r.0 == view).map(|r| &r.1) else {
+        return;
+    };
+    let others: Vec<Vec<Point2<f64>>> = wide
+        .iter()
+        .filter(|r| r.0 != view)
+        .map(|r| r.1.clone())
+        .collect();
+    if others.len() + 1 < options.min_views || region.1.len() < 3 {
+        return;
+    }
+    let majority = others.len() / 2 + 1;
+    let Some(widened) = extent::confirmed_region(
+        &region.1,
+        own,
+        &others,
+        majority,
+        options.tolerance,
+        extent::VOTE_GRID,
+    ) else {
+        return;
+    };
+    if polygon::polygon_area(&widened).abs() <= 1.02 * polygon::polygon_area(&region.1).abs() {
+        return;
+    }
+    let model = &scene.reconstruction;
+    let image = &model.images()[view];
+    let image_polygon: Option<Vec<[f64; 2]>> = widened
+        .iter()
+        .map(|q| {
+            model
+                .project(image, &frame.to_world(q, 0.0))
+                .map(|uv| [uv.x, uv.y])
+        })
+        .collect();
+    let Some(image_polygon) = image_polygon else {
+        return;
+    };
+    let outline: Vec<Point2<f64>> = image_polygon
+        .iter()
+        .map(|p| Point2::new(p[0], p[1]))
+        .collect();
+    region.2 = Boundary {
+        area_px: polygon::polygon_area(&outline).abs(),
+        polygon: image_polygon,
+        superpixels: region.2.superpixels,
+    };
+    region.1 = widened;
+}
+
 /// The image boundary chosen for a leaf.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct BoundaryChoice {
@@ -386,7 +454,8 @@ pub struct BoundaryChoice {
 }
 
 /// Image boundaries of leaf segments (seed 004 §5.4/§6.2): for each, the boundaries in its
-/// best views (most points seen, most frontal), the chosen one by [`consensus_region`].
+/// best views (most points seen, most frontal), the chosen one by [`consensus_region`],
+/// widened by what the other views confirm (`votes`, see [`extent`]).
 /// Superpixels and boundaries are computed in parallel; every boundary computed is added to
 /// `boundaries`.
 pub fn choose_boundaries(
@@ -394,6 +463,7 @@ pub fn choose_boundaries(
     boundaries: &mut Boundaries,
     segments: &[u32],
     plant: &PlantContext,
+    votes: &extent::ViewVoteOptions,
     progress: &dyn Progress,
 ) -> Result<BoundaryChoices, LeafError> {
     use rayon::prelude::*;
@@ -461,12 +531,16 @@ pub fn choose_boundaries(
         .collect();
     progress.stage("leaf boundaries", segments.len() as u64);
     type Regions = Vec<(usize, Vec<Point2<f64>>, Boundary)>;
-    let computed: Vec<(u32, Regions)> = candidates
+    let wide_options = votes
+        .enabled
+        .then(|| votes.boundary_options(input.views.options()));
+    let computed: Vec<(u32, Regions, Vec<(usize, Vec<Point2<f64>>)>)> = candidates
         .par_iter()
         .map(|(segment, frame, views)| {
             let mut regions = Vec::new();
+            let mut wide_regions = Vec::new();
             if progress.is_cancelled() {
-                return (*segment, regions);
+                return (*segment, regions, wide_regions);
             }
             for &view in views {
                 // A view where the graph cut finds nothing simply is not a candidate.
@@ -483,13 +557,31 @@ pub fn choose_boundaries(
                     .as_ref()
                     .and_then(|frame| plane_polygon(input.scene, view, &boundary.polygon, frame));
                 regions.push((view, region.unwrap_or_default(), boundary));
+                // The same view under the weaker prior, for the vote across views.
+                if let (Some(options), Some(frame)) = (&wide_options, frame.as_ref())
+                    && let Ok(wide) = input.views.boundary_with(
+                        input.scene,
+                        input.points,
+                        &input.labels.segment_of,
+                        *segment,
+                        view,
+                        options,
+                    )
+                    && let Some(on_plane) = plane_polygon(input.scene, view, &wide.polygon, frame)
+                {
+                    wide_regions.push((view, on_plane));
+                }
             }
             progress.advance(1);
-            (*segment, regions)
+            (*segment, regions, wide_regions)
         })
         .collect();
+    let frames: HashMap<u32, fit::LeafFrame> = candidates
+        .iter()
+        .filter_map(|(segment, frame, _)| frame.map(|f| (*segment, f)))
+        .collect();
     let mut chosen = HashMap::new();
-    for (segment, regions) in computed {
+    for (segment, mut regions, wide_regions) in computed {
         let on_plane: Vec<(usize, Vec<Point2<f64>>)> = regions
             .iter()
             .filter(|r| r.1.len() >= 3)
@@ -502,6 +594,12 @@ pub fn choose_boundaries(
                 .max_by(|a, b| a.2.area_px.total_cmp(&b.2.area_px))
                 .map(|r| (r.0, 1.0))
         });
+        if let Some((view, _)) = choice
+            && let Some(frame) = frames.get(&segment)
+            && let Some(r) = regions.iter_mut().find(|r| r.0 == view)
+        {
+            widen_by_votes(input.scene, frame, r, &wide_regions, votes);
+        }
         if let Some((view, agreement)) = choice
             && let Some(r) = regions.iter().find(|r| r.0 == view)
         {
@@ -662,7 +760,14 @@ pub fn reconstruct_leaves(
 
     let clock = Instant::now();
     let boundaries = if options.fit.use_boundary {
-        choose_boundaries(input, &mut computed, &leaf_segments, plant, progress)?
+        choose_boundaries(
+            input,
+            &mut computed,
+            &leaf_segments,
+            plant,
+            &options.votes,
+            progress,
+        )?
     } else {
         // Only the generic leaf needs a boundary.
         let mut largest: Vec<(usize, u32)> = leaf_segments
@@ -680,7 +785,7 @@ pub fn reconstruct_leaves(
         {
             some.push(pick.segment);
         }
-        choose_boundaries(input, &mut computed, &some, plant, progress)?
+        choose_boundaries(input, &mut computed, &some, plant, &options.votes, progress)?
     };
     timings.boundaries = clock.elapsed().as_secs_f64();
     if progress.is_cancelled() {

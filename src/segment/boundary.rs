@@ -24,6 +24,12 @@ pub struct BoundaryOptions {
     pub smoothness: f64,
     /// Histogram bins per colour channel.
     pub bins: usize,
+    /// Spatial prior: nats per pixel for each point spacing a foreground superpixel lies
+    /// beyond the reach of the segment's points (see [`ForegroundReach`]).
+    pub reach_slope: f64,
+    /// The graph cut's search window: the segment's projected points' bounding box grown on
+    /// every side by this fraction of its longer side (beyond it, everything is background).
+    pub window_margin: f64,
 }
 
 impl Default for BoundaryOptions {
@@ -32,6 +38,8 @@ impl Default for BoundaryOptions {
             superpixel_step: 10,
             smoothness: 3.0,
             bins: 8,
+            reach_slope: 1.0,
+            window_margin: 0.5,
         }
     }
 }
@@ -62,15 +70,16 @@ pub struct Boundary {
 
 /// How far a region may extend from the segment's projected points: two point spacings (the
 /// median nearest-neighbour distance of the projections) or one superpixel, whichever is
-/// larger; beyond it, labelling a pixel foreground costs one nat per spacing.
+/// larger; beyond it, labelling a pixel foreground costs `slope` nats per spacing.
 struct ForegroundReach {
     tree: Option<ImmutableKdTree<f64, 2>>,
     spacing: f64,
     reach: f64,
+    slope: f64,
 }
 
 impl ForegroundReach {
-    fn new(foreground: &[Point2<f64>], superpixel_step: f64) -> Self {
+    fn new(foreground: &[Point2<f64>], superpixel_step: f64, slope: f64) -> Self {
         let points: Vec<[f64; 2]> = foreground.iter().map(|p| [p.x, p.y]).collect();
         let tree = (points.len() >= 2)
             .then(|| ImmutableKdTree::<f64, 2>::new_from_slice(&points).ok())
@@ -98,6 +107,7 @@ impl ForegroundReach {
             tree,
             spacing,
             reach: (2.0 * spacing).max(superpixel_step),
+            slope: slope.max(0.0),
         }
     }
 
@@ -114,7 +124,7 @@ impl ForegroundReach {
         else {
             return 0.0;
         };
-        ((nearest - self.reach) / self.spacing).max(0.0)
+        self.slope * ((nearest - self.reach) / self.spacing).max(0.0)
     }
 }
 
@@ -342,7 +352,7 @@ impl Oversegmentation {
                 bg_votes[l as usize] += 1;
             }
         }
-        // Search window: the foreground's bounding box grown by half its size.
+        // Search window: the foreground's bounding box grown by a share of its size.
         let (mut lo, mut hi) = (
             Point2::new(f64::INFINITY, f64::INFINITY),
             Point2::new(f64::NEG_INFINITY, f64::NEG_INFINITY),
@@ -351,14 +361,18 @@ impl Oversegmentation {
             lo = Point2::new(lo.x.min(p.x), lo.y.min(p.y));
             hi = Point2::new(hi.x.max(p.x), hi.y.max(p.y));
         }
-        let margin = 0.5 * (hi - lo).max();
+        let margin = options.window_margin.max(0.0) * (hi - lo).max();
         let (lo, hi) = (lo.map(|c| c - margin), hi.map(|c| c + margin));
         let in_window: Vec<bool> = self
             .centroids
             .iter()
             .map(|c| c.x >= lo.x && c.x <= hi.x && c.y >= lo.y && c.y <= hi.y)
             .collect();
-        let reach = ForegroundReach::new(foreground, options.superpixel_step as f64);
+        let reach = ForegroundReach::new(
+            foreground,
+            options.superpixel_step as f64,
+            options.reach_slope,
+        );
 
         let seed_fg = foreground_seeds(&fg_votes, &bg_votes, &self.sizes);
         let seed_bg: Vec<bool> = (0..n)

@@ -108,12 +108,26 @@ impl ViewCache {
         segment: u32,
         view: usize,
     ) -> Result<Boundary, BoundaryError> {
+        self.boundary_with(scene, points, segment_of, segment, view, &self.options)
+    }
+
+    /// [`Self::boundary`] under other graph-cut settings (the view's superpixels stay those
+    /// of the cache's options).
+    pub fn boundary_with(
+        &self,
+        scene: &Scene,
+        points: &PointSet,
+        segment_of: &[i32],
+        segment: u32,
+        view: usize,
+        options: &BoundaryOptions,
+    ) -> Result<Boundary, BoundaryError> {
         let superpixels = self.oversegmentation(scene, view)?;
         let projected = self.projected(scene, points, view);
         let (foreground, background): (Vec<&Projected>, Vec<&Projected>) = projected
             .iter()
             .partition(|p| segment_of[p.point as usize] == segment as i32);
         let uv = |v: Vec<&Projected>| v.into_iter().map(|p| p.uv_image).collect::<Vec<_>>();
-        superpixels.boundary(&uv(foreground), &uv(background), &self.options)
+        superpixels.boundary(&uv(foreground), &uv(background), options)
     }
 }
