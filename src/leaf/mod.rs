@@ -531,10 +531,12 @@ pub fn choose_boundaries(
         .collect();
     progress.stage("leaf boundaries", segments.len() as u64);
     type Regions = Vec<(usize, Vec<Point2<f64>>, Boundary)>;
+    // One per candidate view: the wide region on the leaf's plane.
+    type WideRegions = Vec<(usize, Vec<Point2<f64>>)>;
     let wide_options = votes
         .enabled
         .then(|| votes.boundary_options(input.views.options()));
-    let computed: Vec<(u32, Regions, Vec<(usize, Vec<Point2<f64>>)>)> = candidates
+    let computed: Vec<(u32, Regions, WideRegions)> = candidates
         .par_iter()
         .map(|(segment, frame, views)| {
             let mut regions = Vec::new();
