@@ -188,34 +188,50 @@ impl PlaneGrid {
 }
 
 /// The outer contour (plane coordinates) of the largest connected set of grid cells that lie
-/// inside `keep`, or inside `own` and within `tolerance` (a share of the grid's extent) of at
-/// least `min_votes` of `others`. `own` is one view's region, `others` the other views'
-/// regions on the same plane: a cell of `own` counts when the other views confirm it, up to
-/// the misalignment that a leaf's curvature off its fitted plane causes between views; the
-/// outline stays `own`'s. `None` without a region or when OpenCV fails.
+/// inside `keep`, or inside `own` and confirmed by a majority of the `others` that have a say
+/// on them. `own` is one view's region, `others` the other views' regions on the same plane;
+/// another view confirms a cell when its region lies within `tolerance` (a share of the
+/// grid's extent) of it, the misalignment that a leaf's curvature off its fitted plane causes
+/// between views, and has no say where `hidden(k, cell)` (the leaf there is behind something
+/// in the `k`-th other view). A cell needs at least one confirmation; the outline stays
+/// `own`'s. `None` without a region or when OpenCV fails.
 pub fn confirmed_region(
     keep: &[Point2<f64>],
     own: &[Point2<f64>],
     others: &[Vec<Point2<f64>>],
-    min_votes: usize,
     tolerance: f64,
+    hidden: &dyn Fn(usize, &Point2<f64>) -> bool,
     side: usize,
 ) -> Option<Vec<Point2<f64>>> {
     let keep = keep.to_vec();
     let own = own.to_vec();
     let grid = PlaneGrid::over([&keep, &own].into_iter().chain(others.iter()), side)?;
     let radius = (tolerance.max(0.0) * grid.side as f64).round() as usize;
-    let mut votes = vec![0usize; grid.side * grid.side];
-    for region in others {
-        let covered = grid.dilate(&grid.rasterise(region), radius)?;
-        for (v, c) in votes.iter_mut().zip(covered) {
-            *v += usize::from(c);
-        }
-    }
+    let covered: Vec<Vec<bool>> = others
+        .iter()
+        .map(|region| grid.dilate(&grid.rasterise(region), radius))
+        .collect::<Option<_>>()?;
     let kept = grid.rasterise(&keep);
     let owned = grid.rasterise(&own);
-    let cells: Vec<bool> = (0..votes.len())
-        .map(|k| kept[k] || (owned[k] && votes[k] >= min_votes.max(1)))
+    let cells: Vec<bool> = (0..kept.len())
+        .map(|k| {
+            if kept[k] {
+                return true;
+            }
+            if !owned[k] {
+                return false;
+            }
+            let centre = grid.centre(k % grid.side, k / grid.side);
+            let (mut voters, mut confirmations) = (0usize, 0usize);
+            for (i, cover) in covered.iter().enumerate() {
+                if hidden(i, &centre) {
+                    continue;
+                }
+                voters += 1;
+                confirmations += usize::from(cover[k]);
+            }
+            confirmations >= 1 && confirmations > voters / 2
+        })
         .collect();
     grid.outline(&cells)
 }
@@ -245,8 +261,9 @@ mod tests {
             rectangle(0.02, -0.1, 1.02, 0.9),
             rectangle(0.0, -0.1, 1.4, 0.9),
         ];
+        let seen = |_: usize, _: &Point2<f64>| false;
         let area = |keep: &[Point2<f64>], others: &[Vec<Point2<f64>>], tolerance: f64| {
-            let region = confirmed_region(keep, &own, others, 2, tolerance, VOTE_GRID).unwrap();
+            let region = confirmed_region(keep, &own, others, tolerance, &seen, VOTE_GRID).unwrap();
             polygon::polygon_area(&region).abs()
         };
         // Within the tolerance (0.08 of the grid's extent 1.6: 0.13) the shift is forgiven: the
@@ -256,15 +273,26 @@ mod tests {
         // Without tolerance the shifted views confirm only what they share with the leaf.
         let strict = area(&keep, &others, 0.0);
         assert!((0.87..0.93).contains(&strict), "area {strict}");
-        // With one other view there is no majority of two: the kept half alone.
-        let alone = area(&keep, &others[2..], 0.08);
+        // One other view that does not see the leaf's upper half outvotes the one that does.
+        let blind = rectangle(0.0, -0.1, 1.0, 0.4);
+        let split = vec![others[0].clone(), blind];
+        let tie = area(&keep, &split, 0.08);
+        assert!(tie < 0.7, "area {tie}");
+        // Unless it sees that half behind something: then it has no say.
+        let hidden = |k: usize, q: &Point2<f64>| k == 1 && q.y > 0.5;
+        let region = confirmed_region(&keep, &own, &split, 0.08, &hidden, VOTE_GRID).unwrap();
+        let behind = polygon::polygon_area(&region).abs();
+        assert!((0.98..1.2).contains(&behind), "area {behind}");
+        // With no other view nothing is confirmed: the kept half alone.
+        let alone = area(&keep, &[], 0.08);
         assert!((alone - 0.5).abs() < 0.03, "area {alone}");
     }
 
     #[test]
     fn no_region_gives_none() {
-        assert!(confirmed_region(&[], &[], &[], 1, 0.05, VOTE_GRID).is_none());
+        let seen = |_: usize, _: &Point2<f64>| false;
+        assert!(confirmed_region(&[], &[], &[], 0.05, &seen, VOTE_GRID).is_none());
         let point = vec![Point2::new(1.0, 1.0); 3];
-        assert!(confirmed_region(&point, &point, &[], 1, 0.05, VOTE_GRID).is_none());
+        assert!(confirmed_region(&point, &point, &[], 0.05, &seen, VOTE_GRID).is_none());
     }
 }

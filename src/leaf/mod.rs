@@ -375,14 +375,76 @@ pub struct BoundaryChoices {
     pub unusable_views: Vec<UnusableView>,
 }
 
+/// The nearest depth of the points a view sees that are not one segment's, per square cell of
+/// [`OCCLUDER_CELL_PX`] pixels: where the segment's leaf may be behind something.
+struct OccluderDepths {
+    columns: usize,
+    rows: usize,
+    nearest: Vec<f64>,
+}
+
+/// Side of an occluder-depth cell, pixels (about two fused point spacings in the image).
+const OCCLUDER_CELL_PX: f64 = 4.0;
+
+/// A point hides the leaf when it is nearer than the leaf by more than this share of the
+/// leaf's depth (twice the depth agreement of `frond densify`'s fusion).
+const OCCLUDER_DEPTH_MARGIN: f64 = 0.02;
+
+impl OccluderDepths {
+    fn new(input: &LeafInput, segment: u32, view: usize) -> Self {
+        let model = &input.scene.reconstruction;
+        let camera = model.camera_of(&model.images()[view]);
+        let columns = (camera.width as f64 / OCCLUDER_CELL_PX).ceil().max(1.0) as usize;
+        let rows = (camera.height as f64 / OCCLUDER_CELL_PX).ceil().max(1.0) as usize;
+        let mut nearest = vec![f64::INFINITY; columns * rows];
+        for p in input
+            .views
+            .projected(input.scene, input.points, view)
+            .iter()
+        {
+            if input.labels.segment_of[p.point as usize] == segment as i32 {
+                continue;
+            }
+            let (i, j) = (
+                (p.uv_image.x / OCCLUDER_CELL_PX).floor(),
+                (p.uv_image.y / OCCLUDER_CELL_PX).floor(),
+            );
+            if i >= 0.0 && j >= 0.0 && (i as usize) < columns && (j as usize) < rows {
+                let k = j as usize * columns + i as usize;
+                nearest[k] = nearest[k].min(p.depth_camera);
+            }
+        }
+        Self {
+            columns,
+            rows,
+            nearest,
+        }
+    }
+
+    /// Whether a point at `uv_image` and `depth` is behind one of the points (or off the
+    /// image, where the view cannot tell).
+    fn hides(&self, uv_image: &Point2<f64>, depth: f64) -> bool {
+        let (i, j) = (
+            (uv_image.x / OCCLUDER_CELL_PX).floor(),
+            (uv_image.y / OCCLUDER_CELL_PX).floor(),
+        );
+        if i < 0.0 || j < 0.0 || i as usize >= self.columns || j as usize >= self.rows {
+            return true;
+        }
+        self.nearest[j as usize * self.columns + i as usize] < depth * (1.0 - OCCLUDER_DEPTH_MARGIN)
+    }
+}
+
 /// Widens a leaf's chosen region (`region`: its view, plane polygon and image boundary) by
 /// what its view's wide region (`wide`: one per candidate view, under
 /// [`extent::ViewVoteOptions`]' weaker spatial prior, on the same plane) adds and a majority
-/// of the other views confirm: see [`extent`]. Left as it is with fewer than
-/// [`extent::ViewVoteOptions::min_views`] wide regions, when the chosen region is not on the
-/// plane, when its view has no wide region, or when the vote does not grow it.
+/// of the other views that see that part of the leaf unhidden confirm: see [`extent`]. Left
+/// as it is with fewer than [`extent::ViewVoteOptions::min_views`] wide regions, when the
+/// chosen region is not on the plane, when its view has no wide region, or when the vote
+/// does not grow it.
 fn widen_by_votes(
-    scene: &Scene,
+    input: &LeafInput,
+    segment: u32,
     frame: &fit::LeafFrame,
     region: &mut (usize, Vec<Point2<f64>>, Boundary),
     wide: &[(usize, Vec<Point2<f64>>)],
@@ -392,21 +454,30 @@ fn widen_by_votes(
     let Some(own) = wide.iter().find(|r| r.0 == view).map(|r| &r.1) else {
         return;
     };
-    let others: Vec<Vec<Point2<f64>>> = wide
-        .iter()
-        .filter(|r| r.0 != view)
-        .map(|r| r.1.clone())
-        .collect();
+    let others: Vec<&(usize, Vec<Point2<f64>>)> = wide.iter().filter(|r| r.0 != view).collect();
     if others.len() + 1 < options.min_views || region.1.len() < 3 {
         return;
     }
-    let majority = others.len() / 2 + 1;
+    let model = &input.scene.reconstruction;
+    let occluders: Vec<OccluderDepths> = others
+        .iter()
+        .map(|r| OccluderDepths::new(input, segment, r.0))
+        .collect();
+    let hidden = |k: usize, q: &Point2<f64>| {
+        let image = &model.images()[others[k].0];
+        let point_camera = image.camera_from_world * frame.to_world(q, 0.0);
+        match model.camera_of(image).project(&point_camera.coords) {
+            Some(uv) if point_camera.z > 0.0 => occluders[k].hides(&uv, point_camera.z),
+            _ => true,
+        }
+    };
+    let regions: Vec<Vec<Point2<f64>>> = others.iter().map(|r| r.1.clone()).collect();
     let Some(widened) = extent::confirmed_region(
         &region.1,
         own,
-        &others,
-        majority,
+        &regions,
         options.tolerance,
+        &hidden,
         extent::VOTE_GRID,
     ) else {
         return;
@@ -414,7 +485,6 @@ fn widen_by_votes(
     if polygon::polygon_area(&widened).abs() <= 1.02 * polygon::polygon_area(&region.1).abs() {
         return;
     }
-    let model = &scene.reconstruction;
     let image = &model.images()[view];
     let image_polygon: Option<Vec<[f64; 2]>> = widened
         .iter()
@@ -600,7 +670,7 @@ pub fn choose_boundaries(
             && let Some(frame) = frames.get(&segment)
             && let Some(r) = regions.iter_mut().find(|r| r.0 == view)
         {
-            widen_by_votes(input.scene, frame, r, &wide_regions, votes);
+            widen_by_votes(input, segment, frame, r, &wide_regions, votes);
         }
         if let Some((view, agreement)) = choice
             && let Some(r) = regions.iter().find(|r| r.0 == view)
