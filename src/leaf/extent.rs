@@ -5,17 +5,18 @@
 //! leaks into what touches it in the image: a neighbouring leaf of the same green, backdrop.
 //! Back-projected onto the leaf's plane, the leaf itself lands in the same place from every
 //! view, while a leak lands wherever that view's line of sight puts it: it moves with the view
-//! unless it lies in the leaf's own plane. A plane cell that most views put inside the leaf
-//! is therefore leaf (a plane-restricted visual hull, voted rather than intersected so that a
-//! view where another leaf hides part of this one does not cut that part off).
+//! unless it lies in the leaf's own plane. A cell of one view's wide region that more of the
+//! other views confirm than deny is therefore leaf: a plane-restricted visual hull, voted
+//! rather than intersected, and a view where something nearer hides that part of the leaf has
+//! no say, so that an occluder does not cut the leaf.
 
 use nalgebra::Point2;
-use opencv::core::{Mat, Point, Scalar, Vector};
+use opencv::core::{Mat, Scalar};
 use opencv::prelude::*;
 
 use serde::{Deserialize, Serialize};
 
-use crate::segment::boundary::BoundaryOptions;
+use crate::segment::boundary::{BoundaryOptions, largest_outer_contour};
 use crate::util::polygon;
 
 /// Settings of the vote across views.
@@ -147,24 +148,7 @@ impl PlaneGrid {
 
     /// The outer contour (plane coordinates) of the largest connected set of `cells`.
     fn outline(&self, cells: &[bool]) -> Option<Vec<Point2<f64>>> {
-        let mask = self.mask(cells)?;
-        let mut contours = Vector::<Vector<Point>>::new();
-        opencv::imgproc::find_contours(
-            &mask,
-            &mut contours,
-            opencv::imgproc::RETR_EXTERNAL,
-            opencv::imgproc::CHAIN_APPROX_SIMPLE,
-            Point::new(0, 0),
-        )
-        .ok()?;
-        let mut best: Option<(f64, Vector<Point>)> = None;
-        for contour in contours.iter() {
-            let area = opencv::imgproc::contour_area_def(&contour).ok()?;
-            if best.as_ref().is_none_or(|(a, _)| area > *a) {
-                best = Some((area, contour));
-            }
-        }
-        let (_, contour) = best?;
+        let contour = largest_outer_contour(&self.mask(cells)?).ok()??;
         let centres: Vec<Point2<f64>> = contour
             .iter()
             .map(|p| Point2::new(p.x as f64, p.y as f64))

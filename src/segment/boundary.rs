@@ -128,6 +128,27 @@ impl ForegroundReach {
     }
 }
 
+/// The outer contour of the largest connected region of a binary (8-bit) mask, as OpenCV
+/// traces it through the region's edge pixels; `None` for an empty mask.
+pub(crate) fn largest_outer_contour(mask: &Mat) -> opencv::Result<Option<Vector<Point>>> {
+    let mut contours = Vector::<Vector<Point>>::new();
+    opencv::imgproc::find_contours(
+        mask,
+        &mut contours,
+        opencv::imgproc::RETR_EXTERNAL,
+        opencv::imgproc::CHAIN_APPROX_SIMPLE,
+        Point::new(0, 0),
+    )?;
+    let mut best: Option<(f64, Vector<Point>)> = None;
+    for contour in contours.iter() {
+        let area = opencv::imgproc::contour_area_def(&contour)?;
+        if best.as_ref().is_none_or(|(a, _)| area > *a) {
+            best = Some((area, contour));
+        }
+    }
+    Ok(best.map(|(_, contour)| contour))
+}
+
 /// A superpixel seeds the foreground only where the segment's points fall on it about as
 /// densely as on the segment's typical superpixel: at least this share of the median votes
 /// per pixel. Points densified from photos leave a halo 1–3 px off a leaf's edge (2–5 % of a
@@ -478,22 +499,7 @@ impl Oversegmentation {
                 }
             }
         }
-        let mut contours = Vector::<Vector<Point>>::new();
-        opencv::imgproc::find_contours(
-            &mask,
-            &mut contours,
-            opencv::imgproc::RETR_EXTERNAL,
-            opencv::imgproc::CHAIN_APPROX_SIMPLE,
-            Point::new(0, 0),
-        )?;
-        let mut best: Option<(f64, Vector<Point>)> = None;
-        for contour in contours.iter() {
-            let area = opencv::imgproc::contour_area_def(&contour)?;
-            if best.as_ref().is_none_or(|(a, _)| area > *a) {
-                best = Some((area, contour));
-            }
-        }
-        let Some((_, contour)) = best else {
+        let Some(contour) = largest_outer_contour(&mask)? else {
             return Err(BoundaryError::NoForeground);
         };
         let mut simplified = Vector::<Point>::new();
