@@ -375,12 +375,17 @@ pub struct BoundaryChoices {
     pub unusable_views: Vec<UnusableView>,
 }
 
-/// The nearest depth of the points a view sees that are not one segment's, per square cell of
-/// [`OCCLUDER_CELL_PX`] pixels: where the segment's leaf may be behind something.
+/// The nearest depths of the points a view sees, per square cell of [`OCCLUDER_CELL_PX`]
+/// pixels, kept so that any one segment's occluders can be read from them: the nearest point
+/// of any segment, and the nearest point of a segment other than that one's. A leaf may lie
+/// behind whatever is nearer than it and not its own (one table per view serves every leaf).
 struct OccluderDepths {
     columns: usize,
     rows: usize,
-    nearest: Vec<f64>,
+    /// Per cell: the nearest depth and its segment label.
+    nearest: Vec<(f64, i32)>,
+    /// Per cell: the nearest depth among points whose label differs from `nearest`'s.
+    nearest_other: Vec<f64>,
 }
 
 /// Side of an occluder-depth cell, pixels (about two fused point spacings in the image).
@@ -391,39 +396,50 @@ const OCCLUDER_CELL_PX: f64 = 4.0;
 const OCCLUDER_DEPTH_MARGIN: f64 = 0.02;
 
 impl OccluderDepths {
-    fn new(input: &LeafInput, segment: u32, view: usize) -> Self {
+    fn new(input: &LeafInput, view: usize) -> Self {
         let model = &input.scene.reconstruction;
         let camera = model.camera_of(&model.images()[view]);
         let columns = (camera.width as f64 / OCCLUDER_CELL_PX).ceil().max(1.0) as usize;
         let rows = (camera.height as f64 / OCCLUDER_CELL_PX).ceil().max(1.0) as usize;
-        let mut nearest = vec![f64::INFINITY; columns * rows];
+        let mut nearest = vec![(f64::INFINITY, i32::MIN); columns * rows];
+        let mut nearest_other = vec![f64::INFINITY; columns * rows];
         for p in input
             .views
             .projected(input.scene, input.points, view)
             .iter()
         {
-            if input.labels.segment_of[p.point as usize] == segment as i32 {
-                continue;
-            }
             let (i, j) = (
                 (p.uv_image.x / OCCLUDER_CELL_PX).floor(),
                 (p.uv_image.y / OCCLUDER_CELL_PX).floor(),
             );
-            if i >= 0.0 && j >= 0.0 && (i as usize) < columns && (j as usize) < rows {
-                let k = j as usize * columns + i as usize;
-                nearest[k] = nearest[k].min(p.depth_camera);
+            if i < 0.0 || j < 0.0 || (i as usize) >= columns || (j as usize) >= rows {
+                continue;
+            }
+            let k = j as usize * columns + i as usize;
+            let label = input.labels.segment_of[p.point as usize];
+            let depth = p.depth_camera;
+            let (first_depth, first_label) = nearest[k];
+            if depth < first_depth {
+                // The old nearest is the nearest of everything not labelled `label`.
+                if label != first_label {
+                    nearest_other[k] = first_depth;
+                }
+                nearest[k] = (depth, label);
+            } else if label != first_label {
+                nearest_other[k] = nearest_other[k].min(depth);
             }
         }
         Self {
             columns,
             rows,
             nearest,
+            nearest_other,
         }
     }
 
-    /// Whether a point at `uv_image` and `depth` is behind one of the points (or off the
-    /// image, where the view cannot tell).
-    fn hides(&self, uv_image: &Point2<f64>, depth: f64) -> bool {
+    /// Whether a point of `segment` at `uv_image` and `depth` is behind a point of another
+    /// label (or off the image, where the view cannot tell).
+    fn hides(&self, segment: u32, uv_image: &Point2<f64>, depth: f64) -> bool {
         let (i, j) = (
             (uv_image.x / OCCLUDER_CELL_PX).floor(),
             (uv_image.y / OCCLUDER_CELL_PX).floor(),
@@ -431,7 +447,14 @@ impl OccluderDepths {
         if i < 0.0 || j < 0.0 || i as usize >= self.columns || j as usize >= self.rows {
             return true;
         }
-        self.nearest[j as usize * self.columns + i as usize] < depth * (1.0 - OCCLUDER_DEPTH_MARGIN)
+        let k = j as usize * self.columns + i as usize;
+        let (first_depth, first_label) = self.nearest[k];
+        let occluder = if first_label == segment as i32 {
+            self.nearest_other[k]
+        } else {
+            first_depth
+        };
+        occluder < depth * (1.0 - OCCLUDER_DEPTH_MARGIN)
     }
 }
 
@@ -448,6 +471,7 @@ fn widen_by_votes(
     frame: &fit::LeafFrame,
     region: &mut (usize, Vec<Point2<f64>>, Boundary),
     wide: &[(usize, Vec<Point2<f64>>)],
+    occluders: &HashMap<usize, OccluderDepths>,
     options: &extent::ViewVoteOptions,
 ) {
     let view = region.0;
@@ -459,15 +483,14 @@ fn widen_by_votes(
         return;
     }
     let model = &input.scene.reconstruction;
-    let occluders: Vec<OccluderDepths> = others
-        .iter()
-        .map(|r| OccluderDepths::new(input, segment, r.0))
-        .collect();
     let hidden = |k: usize, q: &Point2<f64>| {
+        let Some(depths) = occluders.get(&others[k].0) else {
+            return true;
+        };
         let image = &model.images()[others[k].0];
         let point_camera = image.camera_from_world * frame.to_world(q, 0.0);
         match model.camera_of(image).project(&point_camera.coords) {
-            Some(uv) if point_camera.z > 0.0 => occluders[k].hides(&uv, point_camera.z),
+            Some(uv) if point_camera.z > 0.0 => depths.hides(segment, &uv, point_camera.z),
             _ => true,
         }
     };
@@ -652,6 +675,18 @@ pub fn choose_boundaries(
         .iter()
         .filter_map(|(segment, frame, _)| frame.map(|f| (*segment, f)))
         .collect();
+    // One occluder table per view that votes on some leaf, built in parallel.
+    let mut voting_views: Vec<usize> = computed
+        .iter()
+        .filter(|c| c.2.len() >= votes.min_views)
+        .flat_map(|c| c.2.iter().map(|r| r.0))
+        .collect();
+    voting_views.sort_unstable();
+    voting_views.dedup();
+    let occluders: HashMap<usize, OccluderDepths> = voting_views
+        .par_iter()
+        .map(|&view| (view, OccluderDepths::new(input, view)))
+        .collect();
     let mut chosen = HashMap::new();
     for (segment, mut regions, wide_regions) in computed {
         let on_plane: Vec<(usize, Vec<Point2<f64>>)> = regions
@@ -670,7 +705,7 @@ pub fn choose_boundaries(
             && let Some(frame) = frames.get(&segment)
             && let Some(r) = regions.iter_mut().find(|r| r.0 == view)
         {
-            widen_by_votes(input, segment, frame, r, &wide_regions, votes);
+            widen_by_votes(input, segment, frame, r, &wide_regions, &occluders, votes);
         }
         if let Some((view, agreement)) = choice
             && let Some(r) = regions.iter().find(|r| r.0 == view)
