@@ -401,8 +401,7 @@ impl OccluderDepths {
         let camera = model.camera_of(&model.images()[view]);
         let columns = (camera.width as f64 / OCCLUDER_CELL_PX).ceil().max(1.0) as usize;
         let rows = (camera.height as f64 / OCCLUDER_CELL_PX).ceil().max(1.0) as usize;
-        let mut nearest = vec![(f64::INFINITY, i32::MIN); columns * rows];
-        let mut nearest_other = vec![f64::INFINITY; columns * rows];
+        let mut depths = Self::empty(columns, rows);
         for p in input
             .views
             .projected(input.scene, input.points, view)
@@ -415,25 +414,42 @@ impl OccluderDepths {
             if i < 0.0 || j < 0.0 || (i as usize) >= columns || (j as usize) >= rows {
                 continue;
             }
-            let k = j as usize * columns + i as usize;
             let label = input.labels.segment_of[p.point as usize];
-            let depth = p.depth_camera;
-            let (first_depth, first_label) = nearest[k];
-            if depth < first_depth {
-                // The old nearest is the nearest of everything not labelled `label`.
-                if label != first_label {
-                    nearest_other[k] = first_depth;
-                }
-                nearest[k] = (depth, label);
-            } else if label != first_label {
-                nearest_other[k] = nearest_other[k].min(depth);
-            }
+            depths.insert(j as usize * columns + i as usize, p.depth_camera, label);
         }
+        depths
+    }
+
+    fn empty(columns: usize, rows: usize) -> Self {
         Self {
             columns,
             rows,
-            nearest,
-            nearest_other,
+            nearest: vec![(f64::INFINITY, i32::MIN); columns * rows],
+            nearest_other: vec![f64::INFINITY; columns * rows],
+        }
+    }
+
+    /// Adds a point of `label` at `depth` to cell `k`.
+    fn insert(&mut self, k: usize, depth: f64, label: i32) {
+        let (first_depth, first_label) = self.nearest[k];
+        if depth < first_depth {
+            // The old nearest is the nearest of everything not labelled `label`.
+            if label != first_label {
+                self.nearest_other[k] = first_depth;
+            }
+            self.nearest[k] = (depth, label);
+        } else if label != first_label {
+            self.nearest_other[k] = self.nearest_other[k].min(depth);
+        }
+    }
+
+    /// The nearest depth in cell `k` of a point not labelled `segment` (infinite if none).
+    fn occluder(&self, k: usize, segment: i32) -> f64 {
+        let (first_depth, first_label) = self.nearest[k];
+        if first_label == segment {
+            self.nearest_other[k]
+        } else {
+            first_depth
         }
     }
 
@@ -448,13 +464,7 @@ impl OccluderDepths {
             return true;
         }
         let k = j as usize * self.columns + i as usize;
-        let (first_depth, first_label) = self.nearest[k];
-        let occluder = if first_label == segment as i32 {
-            self.nearest_other[k]
-        } else {
-            first_depth
-        };
-        occluder < depth * (1.0 - OCCLUDER_DEPTH_MARGIN)
+        self.occluder(k, segment as i32) < depth * (1.0 - OCCLUDER_DEPTH_MARGIN)
     }
 }
 
@@ -1070,4 +1080,34 @@ pub fn reconstruct_leaves(
         boundaries: computed,
         timings,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// One table per view answers every segment's question: the nearest depth in a cell of
+        /// a point with another label, as a direct minimum over those points gives it.
+        #[test]
+        fn one_table_gives_each_segment_its_nearest_other_point(
+            points in prop::collection::vec((0usize..3, 0.1f64..10.0, -1i32..4), 0..60),
+        ) {
+            let mut depths = OccluderDepths::empty(3, 1);
+            for &(cell, depth, label) in &points {
+                depths.insert(cell, depth, label);
+            }
+            for cell in 0..3 {
+                for segment in -1..5 {
+                    let direct = points
+                        .iter()
+                        .filter(|p| p.0 == cell && p.2 != segment)
+                        .map(|p| p.1)
+                        .fold(f64::INFINITY, f64::min);
+                    prop_assert_eq!(depths.occluder(cell, segment), direct);
+                }
+            }
+        }
+    }
 }
