@@ -4,6 +4,9 @@
 //! segment, a point of another leaf segment, and the fitted mesh. Losses at "points" are the
 //! stereo step's; between "points" and "segment" the segmentation's; between "segment" and
 //! "mesh" the fit's.
+//! The other side, where a fitted leaf is too large: the share of the fitted mesh's area (by
+//! triangle centroids) within `r` of its own true leaf, of another true leaf, of a stem, pot
+//! or floor, or of no true surface at all (backdrop or air).
 //! Usage: `cargo run --release --example leaf_coverage -- DATASET RECONSTRUCTION [PRED_MODEL]`.
 
 use std::collections::BTreeMap;
@@ -87,7 +90,23 @@ fn main() -> Result<()> {
         .into_iter()
         .filter_map(|(l, ps)| Neighbours::new(ps).ok().map(|t| (l, t)))
         .collect();
-    println!("gt  seg  samples  seen>=2  points  segment  other  mesh  area_ratio");
+    // Every true surface sample by part, and each other leaf's, for the fitted meshes' excess.
+    let parts = truth.surface_samples.parts.clone().unwrap_or_else(|| {
+        vec![frond::synth::scene::Part::Leaf; truth.surface_samples.positions.len()]
+    });
+    let surface_of = |keep: &dyn Fn(usize) -> bool| -> Option<Neighbours> {
+        Neighbours::new(
+            (0..truth.surface_samples.positions.len())
+                .filter(|&i| keep(i))
+                .map(|i| truth.surface_samples.positions[i]),
+        )
+        .ok()
+    };
+    let not_leaf = surface_of(&|i| parts[i] != frond::synth::scene::Part::Leaf);
+    println!(
+        "gt  seg  samples  seen>=2  points  segment  other  mesh  area_ratio  | mesh on: own  other_leaf  not_leaf  nothing"
+    );
+    let mut excess_sums = [0.0f64; 5];
     let mut sums = [0.0f64; 5];
     let mut count = 0usize;
     for m in &report.leaves.matches {
@@ -133,12 +152,78 @@ fn main() -> Result<()> {
                 hits[3] += 1;
             }
         }
+        // Where the fitted mesh lies: its triangles' centroids, weighted by area.
+        let own = Neighbours::new(samples.iter().copied()).ok();
+        let others = surface_of(&|i| {
+            parts[i] == frond::synth::scene::Part::Leaf
+                && truth.surface_samples.leaf_ids[i] != m.gt_leaf
+        });
+        let mut on = [0.0f64; 4];
+        // The true leaf's plane normal (least principal axis of its samples): a centroid on no
+        // true surface is "off in depth" when its offset from the nearest own sample lies
+        // along it, "outside the outline" when across it.
+        let centre = samples
+            .iter()
+            .map(|p| p.coords)
+            .sum::<nalgebra::Vector3<f64>>()
+            / samples.len() as f64;
+        let scatter = samples.iter().fold(nalgebra::Matrix3::zeros(), |m, p| {
+            let d = p.coords - centre;
+            m + d * d.transpose()
+        });
+        let eigen = scatter.symmetric_eigen();
+        let normal = eigen
+            .eigenvectors
+            .column(eigen.eigenvalues.imin())
+            .into_owned();
+        let mut depth_off = 0.0f64;
+        if let Some(mesh) = mesh {
+            for (t, tri) in mesh.triangles.iter().enumerate() {
+                let c = tri
+                    .iter()
+                    .map(|&v| mesh.positions[v as usize].cast::<f64>().coords)
+                    .sum::<nalgebra::Vector3<f64>>()
+                    / 3.0;
+                let c = Point3::from(c);
+                let area = mesh.triangle_area(t) as f64;
+                let within = |tree: &Option<Neighbours>| {
+                    tree.as_ref()
+                        .and_then(|t| t.nearest(&c))
+                        .is_some_and(|n| n.distance() <= r)
+                };
+                if !within(&own)
+                    && let Some(found) = own.as_ref().and_then(|t| t.nearest(&c))
+                {
+                    let offset = c - samples[found.index];
+                    let across = offset - normal * normal.dot(&offset);
+                    if across.norm() <= r {
+                        depth_off += area;
+                    }
+                }
+                let k = if within(&own) {
+                    0
+                } else if within(&others) {
+                    1
+                } else if within(&not_leaf) {
+                    2
+                } else {
+                    3
+                };
+                on[k] += area;
+            }
+        }
+        let total: f64 = on.iter().sum::<f64>().max(1e-30);
+        let mut shares: Vec<f64> = on.iter().map(|a| a / total).collect();
+        shares.push(depth_off / total);
+        for (s, v) in excess_sums.iter_mut().zip(&shares) {
+            *s += v;
+        }
         views.sort_unstable();
         let n = samples.len() as f64;
         let f: Vec<f64> = hits.iter().map(|&h| h as f64 / n).collect();
         let ratio = mesh.map_or(0.0, |mesh| mesh.area() / record.area);
         println!(
-            "{:>3} {:>4} {:>8} {:>8.3} {:>7.3} {:>8.3} {:>6.3} {:>5.3} {:>11.3}  views p10/p50 {}/{}",
+            "{:>3} {:>4} {:>8} {:>8.3} {:>7.3} {:>8.3} {:>6.3} {:>5.3} {:>11.3}  | {:.3} {:.3} {:.3} {:.3} (off in depth {:.3})  views p10/p50 {}/{}",
             m.gt_leaf,
             m.segment,
             samples.len(),
@@ -148,6 +233,11 @@ fn main() -> Result<()> {
             f[2],
             f[3],
             ratio,
+            shares[0],
+            shares[1],
+            shares[2],
+            shares[3],
+            shares[4],
             views[views.len() / 10],
             views[views.len() / 2]
         );
@@ -165,6 +255,14 @@ fn main() -> Result<()> {
             sums[1] / c,
             sums[2] / c,
             sums[3] / c
+        );
+        println!(
+            "mean share of the fitted mesh on: its own leaf {:.3}, another leaf {:.3}, stem/pot/floor {:.3}, nothing {:.3}; off its leaf in depth only (within r of it across the leaf's plane) {:.3}",
+            excess_sums[0] / c,
+            excess_sums[1] / c,
+            excess_sums[2] / c,
+            excess_sums[3] / c,
+            excess_sums[4] / c
         );
     }
     Ok(())
