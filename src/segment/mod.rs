@@ -16,7 +16,6 @@ pub mod borders;
 pub mod boundary;
 pub mod foreground;
 pub mod labels;
-pub mod photometric;
 pub mod pot;
 pub mod views;
 
