@@ -11,9 +11,7 @@
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use frond::eval::align_to_ground_truth;
-use frond::traits::accuracy::{compare, transform_organs};
-use frond::traits::io::{read_ground_truth, read_reconstruction};
+use frond::traits::accuracy::{TraitComparison, compare_with_truth};
 use frond::traits::{PlantOrgans, branch_length};
 use nalgebra::Point3;
 
@@ -58,31 +56,6 @@ fn chord_length(line: &[[f64; 3]], step: f64) -> f64 {
     kept.windows(2).map(|w| (w[1] - w[0]).norm()).sum()
 }
 
-fn leaf_pairs(dataset: &Path, out: &Path, model: Option<&Path>) -> Result<Vec<(u32, u32)>> {
-    let truth = frond::eval::GroundTruth::load(dataset)?;
-    let mut prediction = frond::eval::Prediction::load(out)?;
-    let alignment = match model {
-        Some(model) => {
-            let (similarity, report) = align_to_ground_truth(dataset, model)?;
-            prediction.transform(&similarity);
-            Some(report)
-        }
-        None => None,
-    };
-    let report = frond::eval::evaluate(
-        &truth,
-        &prediction,
-        alignment,
-        &frond::eval::EvalOptions::default(),
-    )?;
-    Ok(report
-        .leaf_geometry
-        .iter()
-        .filter(|g| g.gt_leaf >= 0 && g.segment >= 0)
-        .map(|g| (g.gt_leaf as u32, g.segment as u32))
-        .collect())
-}
-
 fn carries_tip_leaf(organs: &PlantOrgans, branch: u32) -> bool {
     organs
         .leaves
@@ -95,15 +68,11 @@ fn main() -> Result<()> {
     let dataset = Path::new(args.get(1).context("dataset")?);
     let out = Path::new(args.get(2).context("reconstruction folder")?);
     let model = args.get(3).map(Path::new);
-    let mut organs = read_reconstruction(out, "prediction")?;
-    if let Some(model) = model {
-        let (similarity, _) = align_to_ground_truth(dataset, model)?;
-        transform_organs(&mut organs, &similarity);
-    }
-    let truth = read_ground_truth(dataset, "truth")?;
-    let pairs = leaf_pairs(dataset, out, model)?;
-    let plant_height = frond::eval::GroundTruth::load(dataset)?.plant_height;
-    let (accuracy, _, _) = compare(&truth, &organs, &pairs, plant_height);
+    let TraitComparison {
+        truth,
+        prediction: organs,
+        accuracy,
+    } = compare_with_truth(dataset, out, model)?;
     println!(
         "gt\tpred\tstem\ttip_leaf\tgt_mm\terror_%\tbase_%\ttip_%\tpath_%\tbase_off_mm\ttip_off_mm\tchord10_%\tlateral_mm"
     );

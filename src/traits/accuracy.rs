@@ -214,14 +214,22 @@ pub fn compare(
     (accuracy, gt_table, table)
 }
 
-/// Trait accuracy of a reconstruction output folder against a synthetic dataset: leaves
-/// paired by the evaluation's point matching; with `pred_model` (real COLMAP), the prediction
-/// is first aligned to the truth by its camera centres.
-pub fn evaluate_traits(
+/// A reconstruction output folder compared with a synthetic dataset's truth: the truth's
+/// organs, the prediction's organs (aligned to the truth by its camera centres when
+/// `pred_model`, real COLMAP, is given) and their trait accuracy, leaves paired by the
+/// evaluation's point matching.
+pub struct TraitComparison {
+    pub truth: PlantOrgans,
+    pub prediction: PlantOrgans,
+    pub accuracy: TraitAccuracy,
+}
+
+/// See [`TraitComparison`].
+pub fn compare_with_truth(
     dataset: &std::path::Path,
     out: &std::path::Path,
     pred_model: Option<&std::path::Path>,
-) -> Result<TraitAccuracy, super::TraitsError> {
+) -> Result<TraitComparison, super::TraitsError> {
     let eval_error =
         |path: &std::path::Path, e: crate::eval::EvalError| super::TraitsError::Input {
             path: path.display().to_string(),
@@ -255,7 +263,21 @@ pub fn evaluate_traits(
         .collect();
     let gt_organs = super::io::read_ground_truth(dataset, "truth")?;
     let (accuracy, _, _) = compare(&gt_organs, &organs, &pairs, truth.plant_height);
-    Ok(accuracy)
+    Ok(TraitComparison {
+        truth: gt_organs,
+        prediction: organs,
+        accuracy,
+    })
+}
+
+/// Trait accuracy of a reconstruction output folder against a synthetic dataset
+/// ([`compare_with_truth`]).
+pub fn evaluate_traits(
+    dataset: &std::path::Path,
+    out: &std::path::Path,
+    pred_model: Option<&std::path::Path>,
+) -> Result<TraitAccuracy, super::TraitsError> {
+    Ok(compare_with_truth(dataset, out, pred_model)?.accuracy)
 }
 
 impl TraitAccuracy {
