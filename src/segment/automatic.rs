@@ -13,6 +13,7 @@ use super::borders::{BorderOptions, LeafSheet, on_sheets, reclaim_borders, touch
 use super::foreground::{
     Foreground, ForegroundError, ForegroundOptions, PointClass, separate_foreground,
 };
+use super::photometric::PhotometricOptions;
 use crate::graph::components::Adjacency;
 use crate::graph::gradient::GradientImage;
 use crate::graph::local_shape::{self, FlatSheet, PLANE_NEIGHBOURS, median_spacing};
@@ -35,6 +36,9 @@ pub struct SegmentOptions {
     /// How far a leaf takes back its rim from the stem test ([`super::borders`]).
     #[serde(default)]
     pub borders: BorderOptions,
+    /// The photometric leaf test ([`super::photometric`]).
+    #[serde(default)]
+    pub photometric: PhotometricOptions,
 }
 
 /// What a segment is.
@@ -107,6 +111,9 @@ pub struct Segmentation {
     pub threshold_components: usize,
     /// Segments joined by region merging (see `merge_sheets`).
     pub sheet_merges: usize,
+    /// Leaf segments relabelled other by the photometric test ([`super::photometric`]).
+    #[serde(default)]
+    pub photo_inconsistent: usize,
     pub views_with_images: usize,
     pub ncut: NcutStats,
     pub timings: SegmentTimings,
@@ -541,6 +548,34 @@ fn classify(
         return SegmentLabel::Leaf;
     }
     SegmentLabel::Other
+}
+
+/// Labels other the leaf segments whose points the photos do not show alike
+/// ([`super::photometric`]). Returns how many.
+fn label_photo_inconsistent(
+    scene: &Scene,
+    points: &PointSet,
+    segments: &mut [Segment],
+    options: &PhotometricOptions,
+) -> usize {
+    if options.max_spread_ratio <= 0.0 {
+        return 0;
+    }
+    let leaves: Vec<usize> = (0..segments.len())
+        .filter(|&s| segments[s].label == SegmentLabel::Leaf)
+        .collect();
+    let members: Vec<Vec<u32>> = leaves.iter().map(|&s| segments[s].points.clone()).collect();
+    let spreads =
+        super::photometric::brightness_spread(scene, points, &members, options.samples_per_segment);
+    let failed = super::photometric::inconsistent(&spreads, options);
+    let mut relabelled = 0;
+    for (&s, &fails) in leaves.iter().zip(&failed) {
+        if fails {
+            segments[s].label = SegmentLabel::Other;
+            relabelled += 1;
+        }
+    }
+    relabelled
 }
 
 /// Labels pot the leaf and other segments that lie on the pot's wall ([`super::pot::on_the_wall`]),
@@ -1008,6 +1043,14 @@ pub fn segment_scene(
         wall,
         "segments on the pot's wall"
     );
+    let phase = Instant::now();
+    let photo_inconsistent =
+        label_photo_inconsistent(scene, &points, &mut segments, &options.photometric);
+    tracing::debug!(
+        seconds = phase.elapsed().as_secs_f64(),
+        photo_inconsistent,
+        "leaf segments whose points the photos do not show alike"
+    );
     // A sheet far smaller than this plant's typical leaf is a crumb (of stem, pot, soil or a
     // stereo halo), not a leaf.
     let typical = typical_leaf_points(&segments);
@@ -1036,6 +1079,7 @@ pub fn segment_scene(
         edges_dropped_not_covisible: graph.dropped_not_covisible,
         threshold_components: components.count,
         sheet_merges,
+        photo_inconsistent,
         views_with_images,
         ncut: ncut_stats,
         timings,

@@ -16,6 +16,7 @@ pub mod borders;
 pub mod boundary;
 pub mod foreground;
 pub mod labels;
+pub mod photometric;
 pub mod pot;
 pub mod views;
 
