@@ -14,10 +14,11 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use frond::eval::geometry::{bounding_spheres, distance_to_mesh};
-use frond::eval::{EvalOptions, GroundTruth, Prediction, align_to_ground_truth, evaluate};
+use frond::eval::{EvalOptions, evaluate};
 use frond::graph::neighbours::Neighbours;
-use frond::scene::read_model;
 use nalgebra::Point3;
+
+mod truth;
 
 /// A true leaf sample is covered by what lies within this share of the leaf's length...
 const COVER_LENGTH_SHARE: f64 = 0.01;
@@ -28,58 +29,24 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().collect();
     let gt_root = Path::new(args.get(1).context("dataset")?);
     let out = Path::new(args.get(2).context("reconstruction folder")?);
-    let truth = GroundTruth::load(gt_root)?;
-    let mut pred = Prediction::load(out)?;
-    if let Some(model) = args.get(3) {
-        let (similarity, _) = align_to_ground_truth(gt_root, Path::new(model))?;
-        pred.transform(&similarity);
-    }
+    let model = args.get(3).map(Path::new);
+    let (truth, pred) = truth::load_aligned(gt_root, out, model)?;
     let report = evaluate(&truth, &pred, None, &EvalOptions::default())?;
     // The GT views and their leaf masks (leaf id + 1 per pixel), to count the views that see
     // a surface sample unoccluded.
-    let (gt_model, _) = read_model(&gt_root.join("sparse/0"))?;
-    let mut masks = Vec::new();
-    for image in gt_model.images() {
-        let stem = Path::new(&image.name)
-            .file_stem()
-            .context("image name")?
-            .to_string_lossy()
-            .to_string();
-        let path = gt_root.join("gt/masks").join(format!("{stem}.png"));
-        let mask = image::open(&path)
-            .with_context(|| format!("{}", path.display()))?
-            .into_luma16();
-        masks.push((image, mask));
-    }
+    let masks = truth::LeafMasks::load(gt_root)?;
     let views_seeing = |p: &Point3<f64>, leaf: i64| -> usize {
-        masks
-            .iter()
-            .filter(|(image, mask)| {
-                gt_model.project(image, p).is_some_and(|uv| {
-                    let (x, y) = (uv.x.floor(), uv.y.floor());
-                    x >= 0.0
-                        && y >= 0.0
-                        && (x as u32) < mask.width()
-                        && (y as u32) < mask.height()
-                        && mask.get_pixel(x as u32, y as u32).0[0] as i64 == leaf + 1
-                })
-            })
-            .count()
+        masks.views_where(p, |label| i64::from(label) == leaf + 1)
     };
     let all = Neighbours::new(pred.points.positions.iter().copied())?;
     // The reconstructed points' spacing (median distance to the nearest other point): a
     // sample nearer a point than two spacings is as covered as the sampling allows.
-    let mut gaps: Vec<f64> = (0..all.len())
-        .step_by(17)
-        .filter_map(|i| {
-            all.nearest_k(&all.point(i), std::num::NonZero::new(2)?)
-                .get(1)
-                .map(|n| n.distance())
-        })
-        .collect();
-    gaps.sort_by(f64::total_cmp);
-    let spacing = gaps.get(gaps.len() / 2).copied().unwrap_or(0.0);
-    println!("point spacing {:.2} mm", spacing * 1e3);
+    let spacing = truth::point_spacing(&all);
+    println!(
+        "point spacing {:.2} mm; {} views",
+        spacing * 1e3,
+        masks.len()
+    );
     let mut by_segment: BTreeMap<i64, Vec<Point3<f64>>> = BTreeMap::new();
     for (p, &l) in pred.points.positions.iter().zip(&pred.points.leaf_ids) {
         if l >= 0 {

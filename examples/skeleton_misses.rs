@@ -19,15 +19,14 @@
 //! dataset's own; it aligns the prediction to the truth by the camera centres).
 
 use std::collections::BTreeMap;
-use std::num::NonZero;
 use std::path::Path;
 
 use anyhow::{Context, Result};
 use frond::eval::geometry::petiole_ids;
-use frond::eval::{GroundTruth, Prediction, align_to_ground_truth};
 use frond::graph::neighbours::Neighbours;
-use frond::scene::read_model;
 use nalgebra::Point3;
+
+mod truth;
 
 /// Points this many spacings from a centreline sample are "near" it.
 const NEAR_SPACINGS: f64 = 2.0;
@@ -36,12 +35,8 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().collect();
     let gt_root = Path::new(args.get(1).context("dataset")?);
     let out = Path::new(args.get(2).context("reconstruction folder")?);
-    let truth = GroundTruth::load(gt_root)?;
-    let mut pred = Prediction::load(out)?;
-    if let Some(model) = args.get(3) {
-        let (similarity, _) = align_to_ground_truth(gt_root, Path::new(model))?;
-        pred.transform(&similarity);
-    }
+    let model = args.get(3).map(Path::new);
+    let (truth, pred) = truth::load_aligned(gt_root, out, model)?;
     let skeleton = pred.skeleton.clone().unwrap_or_default();
     anyhow::ensure!(!skeleton.is_empty(), "{}: no skeleton", out.display());
     let all_points = Neighbours::new(pred.points.positions.iter().copied())?;
@@ -54,7 +49,7 @@ fn main() -> Result<()> {
         .map(|(p, _)| *p)
         .collect();
     let non_leaf = Neighbours::new(non_leaf)?;
-    let spacing = point_spacing(&all_points);
+    let spacing = truth::point_spacing(&all_points);
     let near = NEAR_SPACINGS * spacing;
     println!(
         "{} predicted branches, {} true; point spacing {:.2} mm",
@@ -141,7 +136,7 @@ fn main() -> Result<()> {
         .collect();
     let predicted_tree = Neighbours::new(predicted_samples)?;
     let petioles = petiole_ids(&truth.branches, &truth.leaves);
-    let unhidden_views = UnhiddenViews::load(gt_root)?;
+    let masks = truth::LeafMasks::load(gt_root)?;
     let mut missed: BTreeMap<String, f64> = BTreeMap::new();
     let mut lost_along = [0.0f64; 10];
     let mut lost_views = Vec::new();
@@ -169,7 +164,7 @@ fn main() -> Result<()> {
             } else {
                 let decile = ((k as f64 + 0.5) / segments * 10.0).floor() as usize;
                 lost_along[decile.min(9)] += step;
-                lost_views.push(unhidden_views.count(&p));
+                lost_views.push(masks.views_where(&p, |label| label == 0));
                 "missed, no points there"
             };
             *missed.entry(format!("{kind}: {fate}")).or_default() += step;
@@ -196,78 +191,10 @@ fn main() -> Result<()> {
         );
         println!(
             "views not behind a true leaf there ({} views): median {}, tenth percentile {}",
-            unhidden_views.len(),
+            masks.len(),
             lost_views[lost_views.len() / 2],
             lost_views[lost_views.len() / 10]
         );
     }
     Ok(())
-}
-
-/// Median distance from a point to its nearest other point, over a sample of the points.
-fn point_spacing(points: &Neighbours) -> f64 {
-    let Some(two) = NonZero::new(2) else {
-        return 0.0;
-    };
-    let mut gaps: Vec<f64> = (0..points.len())
-        .step_by(17)
-        .filter_map(|i| {
-            points
-                .nearest_k(&points.point(i), two)
-                .get(1)
-                .map(|n| n.distance())
-        })
-        .collect();
-    gaps.sort_by(f64::total_cmp);
-    gaps.get(gaps.len() / 2).copied().unwrap_or(0.0)
-}
-
-/// The dataset's views with their true leaf masks (`gt/masks`, leaf id + 1 per pixel).
-struct UnhiddenViews {
-    model: frond::scene::model::Reconstruction,
-    masks: Vec<image::ImageBuffer<image::Luma<u16>, Vec<u16>>>,
-}
-
-impl UnhiddenViews {
-    fn load(root: &Path) -> Result<Self> {
-        let (model, _) = read_model(&root.join("sparse/0"))?;
-        let mut masks = Vec::new();
-        for image in model.images() {
-            let stem = Path::new(&image.name)
-                .file_stem()
-                .context("image name")?
-                .to_string_lossy()
-                .to_string();
-            let path = root.join("gt/masks").join(format!("{stem}.png"));
-            masks.push(
-                image::open(&path)
-                    .with_context(|| format!("{}", path.display()))?
-                    .into_luma16(),
-            );
-        }
-        Ok(Self { model, masks })
-    }
-
-    fn len(&self) -> usize {
-        self.masks.len()
-    }
-
-    /// Views in which `p` projects into the image onto no true leaf.
-    fn count(&self, p: &Point3<f64>) -> usize {
-        self.model
-            .images()
-            .iter()
-            .zip(&self.masks)
-            .filter(|(image, mask)| {
-                self.model.project(image, p).is_some_and(|uv| {
-                    let (x, y) = (uv.x.floor(), uv.y.floor());
-                    x >= 0.0
-                        && y >= 0.0
-                        && (x as u32) < mask.width()
-                        && (y as u32) < mask.height()
-                        && mask.get_pixel(x as u32, y as u32).0[0] == 0
-                })
-            })
-            .count()
-    }
 }
