@@ -553,10 +553,10 @@ const TUBE_ROUNDNESS: f64 = 0.3;
 /// length times `1 + 8 (1 − cos θ)`, θ its angle to the piece's own backward direction (the
 /// chord over its first four level widths), among points within 40° of that direction and
 /// within three times the piece's main-branch length. Pieces are taken largest
-/// first, so later ones may attach to earlier ones, but not to their bridges, which are drawn
-/// where no point is (a bridge onto a bridge compounds two guesses: from photos of medium
-/// plants such chains ran 10–20 mm off every true centreline); a piece shorter than the shortest kept
-/// branch or with no such point is left out. So is a flat piece (less round than
+/// first, so later ones may attach to earlier ones, but not to their bridges, which are
+/// drawn where no point is (a bridge onto a bridge compounds two guesses: from photos of
+/// medium plants such chains ran 10–20 mm off every true centreline); a piece shorter than
+/// the shortest kept branch or with no such point is left out. So is a flat piece (less round than
 /// [`TUBE_ROUNDNESS`]) whose bridge would be longer than its main branch: stereo smears a
 /// petiole into a flat band too, but then beside the tree, while a band of leaf edge or halo
 /// hangs off the foliage, far from every axis (from photos of broadleaf seeds 1–3 and 11–13,

@@ -61,9 +61,10 @@ const MIN_VIEWS: usize = 3;
 /// relative spread up.
 const MIN_BRIGHTNESS: f64 = 10.0;
 
-/// Relative brightness spread of a segment's points across the views that see them: per
-/// point, the standard deviation of its grey level over its views divided by their mean; the
-/// median over the segment's sampled points. One entry per segment of `segments` (point
+/// Relative brightness spread of a segment's points across the views that see them from one
+/// face (the side of the point's local plane most of them are on): per point, the standard
+/// deviation of its grey level over those views divided by their mean; the median over the
+/// segment's sampled points. One entry per segment of `segments` (point
 /// indices into `points`); `None` where no sampled point has [`MIN_VIEWS`] views with a photo.
 /// Photos that cannot be read are left out.
 pub fn brightness_spread(
