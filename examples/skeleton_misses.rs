@@ -104,15 +104,11 @@ fn main() -> Result<()> {
         }
         off_by_branch.push((branch.id, length, off, through_air));
     }
-    let total: f64 = predicted.values().sum();
-    println!("predicted centreline length {:.0} mm:", total * 1e3);
-    for (class, length) in &predicted {
-        println!(
-            "  {class:<40} {:>7.0} mm  {:>5.1} %",
-            length * 1e3,
-            100.0 * length / total.max(1e-12)
-        );
-    }
+    print_lengths(
+        "predicted centreline length",
+        &predicted,
+        predicted.values().sum(),
+    );
     off_by_branch.sort_by(|a, b| b.2.total_cmp(&a.2));
     let worst: Vec<String> = off_by_branch
         .iter()
@@ -170,14 +166,7 @@ fn main() -> Result<()> {
             *missed.entry(format!("{kind}: {fate}")).or_default() += step;
         }
     }
-    println!("true centreline length {:.0} mm:", true_total * 1e3);
-    for (class, length) in &missed {
-        println!(
-            "  {class:<40} {:>7.0} mm  {:>5.1} %",
-            length * 1e3,
-            100.0 * length / true_total.max(1e-12)
-        );
-    }
+    print_lengths("true centreline length", &missed, true_total);
     let lost: f64 = lost_along.iter().sum();
     if lost > 0.0 {
         let shares: Vec<String> = lost_along
@@ -197,4 +186,17 @@ fn main() -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// Prints `title` with `total` and each class's length (metres) in mm and as a share of it.
+fn print_lengths<K: std::fmt::Display>(title: &str, lengths: &BTreeMap<K, f64>, total: f64) {
+    println!("{title} {:.0} mm:", total * 1e3);
+    for (class, length) in lengths {
+        println!(
+            "  {:<40} {:>7.0} mm  {:>5.1} %",
+            class.to_string(),
+            length * 1e3,
+            100.0 * length / total.max(1e-12)
+        );
+    }
 }

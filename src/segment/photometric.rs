@@ -1,9 +1,9 @@
 //! Whether a leaf segment's points lie on a surface, by what the photos show at them. A point
 //! on a surface looks alike from every view that sees the same face of it (a leaf is close to
 //! Lambertian at the scale of its shading; its two faces differ, so a point is judged from the
-//! side of its local plane that most of its views are on); a point of the stereo halo along a thin stem, where semi-global
-//! matching carried the stem's depth onto the pixels beside it, lies where no surface is, and
-//! each view sees a different thing behind it (backdrop, another leaf, the stem's edge). From
+//! side of its local plane that most of its views are on); a point of the stereo halo along a
+//! thin stem, where semi-global matching carried the stem's depth onto the pixels beside it,
+//! lies where no surface is, and each view sees a different thing behind it (backdrop, another leaf, the stem's edge). From
 //! photos such halos form flat bands that pass the leaf test. A segment whose points' brightness
 //! varies across their views several times as much as the plant's typical leaf segment's is
 //! not a leaf.
@@ -64,9 +64,10 @@ const MIN_BRIGHTNESS: f64 = 10.0;
 /// Relative brightness spread of a segment's points across the views that see them from one
 /// face (the side of the point's local plane most of them are on): per point, the standard
 /// deviation of its grey level over those views divided by their mean; the median over the
-/// segment's sampled points. One entry per segment of `segments` (point
-/// indices into `points`); `None` where no sampled point has [`MIN_VIEWS`] views with a photo.
-/// Photos that cannot be read are left out.
+/// segment's sampled points. One entry per segment of `segments` (point indices into
+/// `points`); `None` where no sampled point has [`MIN_VIEWS`] views with a photo. Photos that
+/// cannot be read are left out. The local plane is fitted to the segment's own points, not
+/// taken from the graph's normals, whose neighbourhoods reach into touching organs.
 pub fn brightness_spread(
     scene: &Scene,
     points: &PointSet,
@@ -156,18 +157,19 @@ fn views_on_one_side(
     views: &[u32],
     centres: &[Point3<f64>],
 ) -> Vec<u32> {
-    let side = |view: u32| {
-        centres
-            .get(view as usize)
-            .map(|centre| (centre - point).dot(normal) > 0.0)
-    };
-    let positive = views.iter().filter(|&&v| side(v) == Some(true)).count();
-    let negative = views.iter().filter(|&&v| side(v) == Some(false)).count();
-    let keep = positive >= negative;
-    views
+    let sides: Vec<(u32, bool)> = views
         .iter()
-        .copied()
-        .filter(|&v| side(v) == Some(keep))
+        .filter_map(|&view| {
+            let centre = centres.get(view as usize)?;
+            Some((view, (centre - point).dot(normal) > 0.0))
+        })
+        .collect();
+    let positive = sides.iter().filter(|(_, above)| *above).count();
+    let keep = 2 * positive >= sides.len();
+    sides
+        .into_iter()
+        .filter(|&(_, above)| above == keep)
+        .map(|(view, _)| view)
         .collect()
 }
 
