@@ -114,6 +114,10 @@ pub struct Segmentation {
     /// Leaf segments relabelled other by the photometric test ([`super::photometric`]).
     #[serde(default)]
     pub photo_inconsistent: usize,
+    /// Small leaf segments joined to another across a gap as pieces of one leaf
+    /// ([`super::pieces`]).
+    #[serde(default)]
+    pub pieces_joined: usize,
     pub views_with_images: usize,
     pub ncut: NcutStats,
     pub timings: SegmentTimings,
@@ -363,12 +367,12 @@ const MIN_FOUND_SHARE_OF_TYPICAL_LEAF: f64 = 0.25;
 /// ([`typical_leaf_points`]): a leaf 4.5 times shorter than the typical one, or one mostly
 /// hidden. Sheets smaller than that are crumbs: on photos of a broadleaf plant (leaves of
 /// 1,800–8,300 densified points) 40 sheets of 20–180 points from stems, pot and the stereo halo.
-const MIN_SHARE_OF_TYPICAL_LEAF: f64 = 0.05;
+pub(crate) const MIN_SHARE_OF_TYPICAL_LEAF: f64 = 0.05;
 
 /// The size of a typical leaf of the plant: the point count of the leaf-labelled segment that
 /// holds the median leaf point (a size-weighted median, so many small crumbs do not pull it
 /// down); 0 without leaf segments.
-fn typical_leaf_points(segments: &[Segment]) -> f64 {
+pub(crate) fn typical_leaf_points(segments: &[Segment]) -> f64 {
     let mut sizes: Vec<usize> = segments
         .iter()
         .filter(|s| s.label == SegmentLabel::Leaf)
@@ -1051,6 +1055,18 @@ pub fn segment_scene(
         photo_inconsistent,
         "leaf segments whose points the photos do not show alike"
     );
+    let phase = Instant::now();
+    let pieces_joined = super::pieces::join_leaf_pieces(
+        &mut segments,
+        &mut point_segment,
+        &points.positions,
+        spacing,
+    );
+    tracing::debug!(
+        seconds = phase.elapsed().as_secs_f64(),
+        pieces_joined,
+        "pieces of one leaf joined across a gap"
+    );
     // A sheet far smaller than this plant's typical leaf is a crumb (of stem, pot, soil or a
     // stereo halo), not a leaf.
     let typical = typical_leaf_points(&segments);
@@ -1080,6 +1096,7 @@ pub fn segment_scene(
         threshold_components: components.count,
         sheet_merges,
         photo_inconsistent,
+        pieces_joined,
         views_with_images,
         ncut: ncut_stats,
         timings,

@@ -9,6 +9,7 @@
 //! - [`labels`]: the current labels (segment per point, state per segment) as plain data; the
 //!   editing session changes them, later stages read them.
 //! - [`views`]: per-view projections and superpixels, cached; a segment's boundary in a view.
+//! - [`pieces`]: small leaf segments a gap apart joined as pieces of one leaf.
 //! - [`boundary`]: image boundaries (§5.4): watershed superpixels and a two-label graph cut.
 
 pub mod automatic;
@@ -17,6 +18,7 @@ pub mod boundary;
 pub mod foreground;
 pub mod labels;
 pub mod photometric;
+pub mod pieces;
 pub mod pot;
 pub mod views;
 
