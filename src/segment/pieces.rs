@@ -68,16 +68,30 @@ pub fn join_leaf_pieces(
     loop {
         let pieces: Vec<usize> = (0..segments.len())
             .filter(|&s| {
-                segments[s].label == SegmentLabel::Leaf
-                    && !segments[s].points.is_empty()
-                    && (segments[s].points.len() as f64) < limit
-                    && (segments[s].points.len() as f64) >= least
+                let size = segments[s].points.len() as f64;
+                segments[s].label == SegmentLabel::Leaf && size < limit && size >= least.max(1.0)
             })
             .collect();
         let trees: Vec<Option<Neighbours>> = pieces
             .iter()
             .map(|&s| {
                 Neighbours::new(segments[s].points.iter().map(|&i| positions[i as usize])).ok()
+            })
+            .collect();
+        // Bounding spheres (centroid, radius), to skip pairs that cannot come near.
+        let spheres: Vec<(Point3<f64>, f64)> = pieces
+            .iter()
+            .map(|&s| {
+                let members = &segments[s].points;
+                let sum = members.iter().fold(nalgebra::Vector3::zeros(), |acc, &i| {
+                    acc + positions[i as usize].coords
+                });
+                let centre = Point3::from(sum / members.len().max(1) as f64);
+                let radius = members
+                    .iter()
+                    .map(|&i| (positions[i as usize] - centre).norm())
+                    .fold(0.0, f64::max);
+                (centre, radius)
             })
             .collect();
         let rough: Vec<f64> = pieces
@@ -88,6 +102,9 @@ pub fn join_leaf_pieces(
         let mut candidates: Vec<(f64, usize, usize)> = Vec::new();
         for a in 0..pieces.len() {
             for b in a + 1..pieces.len() {
+                if (spheres[a].0 - spheres[b].0).norm() > spheres[a].1 + spheres[b].1 + gap {
+                    continue;
+                }
                 let (Some(tree), true) = (&trees[b], rough[a].is_finite() && rough[b].is_finite())
                 else {
                     continue;
