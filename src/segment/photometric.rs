@@ -3,10 +3,10 @@
 //! Lambertian at the scale of its shading; its two faces differ, so a point is judged from the
 //! side of its local plane that most of its views are on); a point of the stereo halo along a
 //! thin stem, where semi-global matching carried the stem's depth onto the pixels beside it,
-//! lies where no surface is, and each view sees a different thing behind it (backdrop, another leaf, the stem's edge). From
-//! photos such halos form flat bands that pass the leaf test. A segment whose points' brightness
-//! varies across their views several times as much as the plant's typical leaf segment's is
-//! not a leaf.
+//! lies where no surface is, and each view sees a different thing behind it (backdrop, another
+//! leaf, the stem's edge). From photos such halos form flat bands that pass the leaf test. A
+//! segment whose points' brightness varies across their views several times as much as the
+//! plant's typical leaf segment's is not a leaf.
 //!
 //! Chosen on the points `frond densify` made from the photos of medium seeds 3–7 (the
 //! evaluation's classes of each leaf segment, measured with the mean of the colour channels'

@@ -150,8 +150,7 @@ pub fn join_leaf_pieces(
         }
         for (s, segment) in segments.iter_mut().enumerate() {
             if touched[s] && !segment.points.is_empty() {
-                let (shape, _) = roughness(positions, &segment.points);
-                segment.shape = shape;
+                segment.shape = Shape::of(segment.points.iter().map(|&i| positions[i as usize]));
                 segment.num_points = segment.points.len();
             }
         }
@@ -198,22 +197,13 @@ mod tests {
         ((x >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
     }
 
-    /// Grid points (1 mm apart) of an elliptic leaf with half-axes `a`, `b` (mm), bent along its
-    /// length, lifted by `height` and moved by `shift` (mm), leaving out `|x − gap_at| < gap/2`;
-    /// 0.1 mm of noise across the blade. Metres.
-    fn leaf(
-        a: f64,
-        b: f64,
-        shift: [f64; 2],
-        height: f64,
-        gap_at: f64,
-        gap: f64,
-    ) -> Vec<Point3<f64>> {
-        bent_leaf(a, b, shift, height, gap_at, gap, 0.02)
-    }
+    /// The bend of the test leaves (mm of rise per mm² along the length, over `a`).
+    const BEND: f64 = 0.02;
 
-    /// [`leaf`] with its bend (mm of rise per mm² along the length, over `a`) given.
-    fn bent_leaf(
+    /// Grid points (1 mm apart) of an elliptic leaf with half-axes `a`, `b` (mm), bent along its
+    /// length by `bend`, lifted by `height` and moved by `shift` (mm), leaving out
+    /// `|x − gap_at| < gap/2`; 0.1 mm of noise across the blade. Metres.
+    fn leaf(
         a: f64,
         b: f64,
         shift: [f64; 2],
@@ -266,8 +256,8 @@ mod tests {
     /// Two large leaves set the plant's typical leaf (about 1,500 points each).
     fn typical_leaves() -> Vec<Vec<Point3<f64>>> {
         vec![
-            leaf(30.0, 16.0, [100.0, 0.0], 0.0, 1e9, 0.0),
-            leaf(30.0, 16.0, [-100.0, 0.0], 0.0, 1e9, 0.0),
+            leaf(30.0, 16.0, [100.0, 0.0], 0.0, 1e9, 0.0, BEND),
+            leaf(30.0, 16.0, [-100.0, 0.0], 0.0, 1e9, 0.0, BEND),
         ]
     }
 
@@ -279,7 +269,7 @@ mod tests {
     #[test]
     fn pieces_of_one_leaf_split_by_a_band_are_joined() {
         // A small leaf (about 300 points) with a 3 mm band across its middle taken out.
-        let [left, right] = halves(leaf(12.0, 8.0, [0.0, 0.0], 0.0, 0.0, 3.0));
+        let [left, right] = halves(leaf(12.0, 8.0, [0.0, 0.0], 0.0, 0.0, 3.0, BEND));
         let (n_left, n_right) = (left.len(), right.len());
         let mut groups = typical_leaves();
         groups.push(left);
@@ -303,8 +293,8 @@ mod tests {
     fn a_neighbouring_leaf_at_another_height_is_not_joined() {
         // Two small leaves side by side, 3 mm apart across and 3 mm apart in height (nearer
         // than the gap): two leaves of one whorl, not one leaf.
-        let near = leaf(12.0, 6.0, [0.0, 0.0], 0.0, 1e9, 0.0);
-        let far = leaf(12.0, 6.0, [0.0, 15.0], 3.0, 1e9, 0.0);
+        let near = leaf(12.0, 6.0, [0.0, 0.0], 0.0, 1e9, 0.0, BEND);
+        let far = leaf(12.0, 6.0, [0.0, 15.0], 3.0, 1e9, 0.0, BEND);
         let closest = near
             .iter()
             .flat_map(|p| far.iter().map(move |q| (p - q).norm()))
@@ -325,7 +315,7 @@ mod tests {
 
     #[test]
     fn pieces_farther_apart_than_the_gap_are_not_joined() {
-        let [left, right] = halves(leaf(12.0, 8.0, [0.0, 0.0], 0.0, 0.0, 8.0));
+        let [left, right] = halves(leaf(12.0, 8.0, [0.0, 0.0], 0.0, 0.0, 8.0, BEND));
         let mut groups = typical_leaves();
         groups.push(left);
         groups.push(right);
@@ -341,8 +331,8 @@ mod tests {
         // Two narrow leaflets end to end across a 3 mm rachis, in one plane: each a piece by
         // size, together longer than the typical leaf.
         let mut groups = typical_leaves();
-        groups.push(bent_leaf(20.0, 3.0, [-21.5, 40.0], 0.0, 1e9, 0.0, 0.0));
-        groups.push(bent_leaf(20.0, 3.0, [21.5, 40.0], 0.0, 1e9, 0.0, 0.0));
+        groups.push(leaf(20.0, 3.0, [-21.5, 40.0], 0.0, 1e9, 0.0, 0.0));
+        groups.push(leaf(20.0, 3.0, [21.5, 40.0], 0.0, 1e9, 0.0, 0.0));
         let (mut segments, mut point_segment, positions) = segments_of(&groups);
         assert_eq!(
             join_leaf_pieces(&mut segments, &mut point_segment, &positions, 1e-3),
@@ -353,7 +343,7 @@ mod tests {
     #[test]
     fn crumbs_are_not_joined_into_a_leaf() {
         // Two crumbs of about 30 points each (2 % of the typical leaf) beside each other.
-        let [left, right] = halves(leaf(4.0, 3.0, [0.0, 0.0], 0.0, 0.0, 1.5));
+        let [left, right] = halves(leaf(4.0, 3.0, [0.0, 0.0], 0.0, 0.0, 1.5, BEND));
         assert!(left.len() < 40 && right.len() < 40);
         let mut groups = typical_leaves();
         groups.push(left);
