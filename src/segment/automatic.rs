@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -555,10 +555,13 @@ fn classify(
 }
 
 /// Labels other the leaf segments whose points the photos do not show alike
-/// ([`super::photometric`]). Returns how many.
+/// ([`super::photometric`]), judging more strictly those that stand upright: whose longest
+/// axis is within `options.min_upright_cos` of `up`, the plant's up direction, as the stereo
+/// halo along an upright stem does. Returns how many.
 fn label_photo_inconsistent(
     scene: &Scene,
     points: &PointSet,
+    up: &Vector3<f64>,
     segments: &mut [Segment],
     options: &PhotometricOptions,
 ) -> usize {
@@ -571,7 +574,14 @@ fn label_photo_inconsistent(
     let members: Vec<Vec<u32>> = leaves.iter().map(|&s| segments[s].points.clone()).collect();
     let spreads =
         super::photometric::brightness_spread(scene, points, &members, options.samples_per_segment);
-    let failed = super::photometric::inconsistent(&spreads, options);
+    let upright: Vec<bool> = members
+        .iter()
+        .map(|members| {
+            let shape = Shape::of(members.iter().map(|&p| points.positions[p as usize]));
+            shape.axes[0].dot(up).abs() >= options.min_upright_cos
+        })
+        .collect();
+    let failed = super::photometric::inconsistent(&spreads, &upright, options);
     let mut relabelled = 0;
     for (&s, &fails) in leaves.iter().zip(&failed) {
         if fails {
@@ -1048,8 +1058,13 @@ pub fn segment_scene(
         "segments on the pot's wall"
     );
     let phase = Instant::now();
-    let photo_inconsistent =
-        label_photo_inconsistent(scene, &points, &mut segments, &options.photometric);
+    let photo_inconsistent = label_photo_inconsistent(
+        scene,
+        &points,
+        &foreground.up,
+        &mut segments,
+        &options.photometric,
+    );
     tracing::debug!(
         seconds = phase.elapsed().as_secs_f64(),
         photo_inconsistent,
