@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::Point3;
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -554,14 +554,27 @@ fn classify(
     SegmentLabel::Other
 }
 
+/// The plant's horizontal reach from its axis: this quantile of its points' distances.
+const PLANT_REACH_QUANTILE: f64 = 0.95;
+
+/// Distance of `point` from the plant's axis (the vertical through the point the cameras
+/// look at).
+fn horizontal_distance(foreground: &Foreground, point: &Point3<f64>) -> f64 {
+    let offset = point - foreground.plant_center;
+    (offset - foreground.up * foreground.up.dot(&offset)).norm()
+}
+
 /// Labels other the leaf segments whose points the photos do not show alike
-/// ([`super::photometric`]), judging more strictly those that stand upright: whose longest
-/// axis is within `options.min_upright_cos` of `up`, the plant's up direction, as the stereo
-/// halo along an upright stem does. Returns how many.
+/// ([`super::photometric`]), judging more strictly those that stand upright near the plant's
+/// axis as the stereo halo along its main stem does: whose longest axis is within
+/// `options.min_upright_cos` of `foreground.up` and whose centroid lies within
+/// `options.max_upright_axis_share` of `reach` (the plant's horizontal reach from its axis
+/// through `foreground.plant_center`). Returns how many.
 fn label_photo_inconsistent(
     scene: &Scene,
     points: &PointSet,
-    up: &Vector3<f64>,
+    foreground: &Foreground,
+    reach: f64,
     segments: &mut [Segment],
     options: &PhotometricOptions,
 ) -> usize {
@@ -578,7 +591,9 @@ fn label_photo_inconsistent(
         .iter()
         .map(|members| {
             let shape = Shape::of(members.iter().map(|&p| points.positions[p as usize]));
-            shape.axes[0].dot(up).abs() >= options.min_upright_cos
+            shape.axes[0].dot(&foreground.up).abs() >= options.min_upright_cos
+                && horizontal_distance(foreground, &shape.centroid)
+                    <= options.max_upright_axis_share * reach
         })
         .collect();
     let failed = super::photometric::inconsistent(&spreads, &upright, options);
@@ -1058,10 +1073,17 @@ pub fn segment_scene(
         "segments on the pot's wall"
     );
     let phase = Instant::now();
+    let mut reaches: Vec<f64> = plant_points
+        .positions
+        .iter()
+        .map(|p| horizontal_distance(&foreground, p))
+        .collect();
+    let plant_reach = crate::util::stats::quantile(&mut reaches, PLANT_REACH_QUANTILE);
     let photo_inconsistent = label_photo_inconsistent(
         scene,
         &points,
-        &foreground.up,
+        &foreground,
+        plant_reach,
         &mut segments,
         &options.photometric,
     );

@@ -47,8 +47,11 @@ pub struct PhotometricOptions {
     /// like the others).
     pub max_spread_ratio_upright: f64,
     /// A segment stands upright where the cosine between its longest principal axis and the
-    /// plant's up direction is at least this (0.5: within 60° of vertical).
+    /// plant's up direction is at least this (0.5: within 60° of vertical) and its centroid
+    /// lies near the plant's axis (see `max_upright_axis_share`).
     pub min_upright_cos: f64,
+    /// Near the plant's axis: within this share of the plant's horizontal reach from it.
+    pub max_upright_axis_share: f64,
     /// Points sampled per segment at most (evenly over its points).
     pub samples_per_segment: usize,
     /// Leaf segments a plant needs for its median to be a reference.
@@ -61,6 +64,7 @@ impl Default for PhotometricOptions {
             max_spread_ratio: 3.0,
             max_spread_ratio_upright: 2.0,
             min_upright_cos: 0.5,
+            max_upright_axis_share: 0.3,
             samples_per_segment: 300,
             min_segments: 5,
         }
