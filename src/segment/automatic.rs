@@ -554,22 +554,15 @@ fn classify(
     SegmentLabel::Other
 }
 
-/// The plant's horizontal reach from its axis: this quantile of its points' distances.
+/// The plant's horizontal reach from its axis: this quantile of its points' distances from
+/// the vertical through the point the cameras look at.
 const PLANT_REACH_QUANTILE: f64 = 0.95;
 
-/// Distance of `point` from the plant's axis (the vertical through the point the cameras
-/// look at).
-fn horizontal_distance(foreground: &Foreground, point: &Point3<f64>) -> f64 {
-    let offset = point - foreground.plant_center;
-    (offset - foreground.up * foreground.up.dot(&offset)).norm()
-}
-
 /// Labels other the leaf segments whose points the photos do not show alike
-/// ([`super::photometric`]), judging more strictly those that stand upright near the plant's
-/// axis as the stereo halo along its main stem does: whose longest axis is within
-/// `options.min_upright_cos` of `foreground.up` and whose centroid lies within
-/// `options.max_upright_axis_share` of `reach` (the plant's horizontal reach from its axis
-/// through `foreground.plant_center`). Returns how many.
+/// ([`super::photometric`]), judging more strictly those that stand upright by the plant's
+/// axis, as the stereo halo along its main stem does ([`super::photometric::stands_by_the_axis`];
+/// the axis is the vertical through `foreground.plant_center`, `reach` the plant's horizontal
+/// reach from it). Returns how many.
 fn label_photo_inconsistent(
     scene: &Scene,
     points: &PointSet,
@@ -591,9 +584,13 @@ fn label_photo_inconsistent(
         .iter()
         .map(|members| {
             let shape = Shape::of(members.iter().map(|&p| points.positions[p as usize]));
-            shape.axes[0].dot(&foreground.up).abs() >= options.min_upright_cos
-                && horizontal_distance(foreground, &shape.centroid)
-                    <= options.max_upright_axis_share * reach
+            super::photometric::stands_by_the_axis(
+                &shape,
+                &foreground.plant_center,
+                &foreground.up,
+                reach,
+                options,
+            )
         })
         .collect();
     let failed = super::photometric::inconsistent(&spreads, &upright, options);
@@ -1076,7 +1073,9 @@ pub fn segment_scene(
     let mut reaches: Vec<f64> = plant_points
         .positions
         .iter()
-        .map(|p| horizontal_distance(&foreground, p))
+        .map(|p| {
+            super::photometric::distance_from_axis(p, &foreground.plant_center, &foreground.up)
+        })
         .collect();
     let plant_reach = crate::util::stats::quantile(&mut reaches, PLANT_REACH_QUANTILE);
     let photo_inconsistent = label_photo_inconsistent(
