@@ -374,41 +374,21 @@ mod tests {
             Shape::of(points.into_iter())
         };
         let reach = 0.2;
-        assert!(stands_by_the_axis(
-            &band(0.01, 0.0),
-            &axis_point,
-            &up,
-            reach,
-            &options
-        ));
-        assert!(stands_by_the_axis(
-            &band(0.01, 50.0),
-            &axis_point,
-            &up,
-            reach,
-            &options
-        ));
-        assert!(!stands_by_the_axis(
-            &band(0.1, 0.0),
-            &axis_point,
-            &up,
-            reach,
-            &options
-        ));
-        assert!(!stands_by_the_axis(
-            &band(0.01, 70.0),
-            &axis_point,
-            &up,
-            reach,
-            &options
-        ));
-        assert!(!stands_by_the_axis(
-            &band(0.01, 90.0),
-            &axis_point,
-            &up,
-            reach,
-            &options
-        ));
+        // (distance out, tilt from vertical in degrees, stands by the axis)
+        for (out, tilt, expected) in [
+            (0.01, 0.0, true),
+            (0.01, 50.0, true),
+            (0.1, 0.0, false),
+            (0.01, 70.0, false),
+            (0.01, 90.0, false),
+        ] {
+            let shape = band(out, tilt);
+            assert_eq!(
+                stands_by_the_axis(&shape, &axis_point, &up, reach, &options),
+                expected,
+                "band {out} m out, tilted {tilt}°"
+            );
+        }
         assert!(
             (distance_from_axis(&Point3::new(0.03, 0.04, 5.0), &axis_point, &up) - 0.05).abs()
                 < 1e-12
