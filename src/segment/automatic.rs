@@ -399,6 +399,63 @@ struct SheetScale {
     min_facing: f64,
 }
 
+/// Below this quantile of the plant points' heights lies its ground where the foreground found
+/// no floor ([`PlantHeights`]): stray points under the plant stay out.
+const GROUND_QUANTILE: f64 = 0.02;
+
+/// Above this quantile of the plant points' heights lies only its top's stray points.
+const TOP_QUANTILE: f64 = 0.98;
+
+/// Heights along the plant's up direction for the pot test of [`classify`] (a pot is low):
+/// above the floor where the foreground found one; otherwise above the plant's ground, its
+/// points' [`GROUND_QUANTILE`] height. The point the cameras look at, which the heights were
+/// once measured from without a floor, is mid-plant: on the real Arabidopsis (no floor in its
+/// points) every segment below the lower two thirds of its 34 cm stem counted as low, and
+/// pieces of the stem's halo were labelled pot.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct PlantHeights {
+    /// Without a floor: the ground's height above the point the cameras look at.
+    ground: f64,
+    /// The plant's top ([`TOP_QUANTILE`] of its points) above the floor or the ground.
+    top: f64,
+}
+
+impl PlantHeights {
+    /// The heights of the plant's `positions` (see the type's docs); `top` is at least 1e-9.
+    fn of(positions: &[Point3<f64>], foreground: &Foreground) -> Self {
+        let mut heights: Vec<f64> = positions
+            .iter()
+            .map(|p| match &foreground.floor {
+                Some(floor) => floor.signed_distance(p),
+                None => foreground.up.dot(&(p - foreground.plant_center)),
+            })
+            .collect();
+        heights.sort_by(f64::total_cmp);
+        let at = |q: f64| {
+            heights
+                .get((heights.len() as f64 * q) as usize)
+                .copied()
+                .unwrap_or(0.0)
+        };
+        let ground = match foreground.floor {
+            Some(_) => 0.0,
+            None => at(GROUND_QUANTILE),
+        };
+        Self {
+            ground,
+            top: (at(TOP_QUANTILE) - ground).max(1e-9),
+        }
+    }
+
+    /// A point's height above the floor or the plant's ground.
+    fn of_point(&self, p: &Point3<f64>, foreground: &Foreground) -> f64 {
+        match &foreground.floor {
+            Some(floor) => floor.signed_distance(p),
+            None => foreground.up.dot(&(p - foreground.plant_center)) - self.ground,
+        }
+    }
+}
+
 /// What [`classify`] needs besides a group's own points: the graph's points, normals and noise,
 /// and the plant's place and size.
 struct LeafTest<'a> {
@@ -406,7 +463,7 @@ struct LeafTest<'a> {
     graph: &'a PointGraph,
     min_facing: f64,
     foreground: &'a Foreground,
-    plant_height: f64,
+    heights: PlantHeights,
     options: &'a NcutOptions,
 }
 
@@ -430,7 +487,7 @@ impl LeafTest<'_> {
                 min_facing: self.min_facing,
             },
             self.foreground,
-            self.plant_height,
+            self.heights,
             self.options,
         );
         (shape, noise, label)
@@ -506,7 +563,7 @@ fn classify(
     normals: &[nalgebra::Vector3<f64>],
     sheet: SheetScale,
     foreground: &Foreground,
-    plant_height: f64,
+    heights: PlantHeights,
     options: &NcutOptions,
 ) -> SegmentLabel {
     if shape.count < options.min_segment_points {
@@ -516,10 +573,6 @@ fn classify(
         return SegmentLabel::Stem;
     }
     let up = foreground.up;
-    let height = |p: &Point3<f64>| match &foreground.floor {
-        Some(floor) => floor.signed_distance(p),
-        None => up.dot(&(p - foreground.plant_center)),
-    };
     let (mean_radius, spread) =
         super::pot::radial_mean_and_spread(points, &foreground.plant_center, &up);
     // Which twelfths of the circle around the axis the segment covers: a leaf never wraps
@@ -534,7 +587,9 @@ fn classify(
         covered[bin.min(11)] = true;
     }
     let wraps = covered.iter().filter(|c| **c).count() >= 9;
-    if height(&shape.centroid) < 0.35 * plant_height && (spread < 0.1 * mean_radius || wraps) {
+    if heights.of_point(&shape.centroid, foreground) < 0.35 * heights.top
+        && (spread < 0.1 * mean_radius || wraps)
+    {
         return SegmentLabel::Pot;
     }
     // A leaf is one smooth sheet (a cubic height field also follows leaves whose bend
@@ -756,7 +811,7 @@ impl LeafParts<'_> {
         plane_rms: f64,
         min_points: usize,
         sheet: SheetScale,
-        plant_height: f64,
+        heights: PlantHeights,
         options: &SegmentOptions,
     ) -> usize {
         let Some(flat) = FlatSheet::like(self.spacing, plane_rms) else {
@@ -806,7 +861,7 @@ impl LeafParts<'_> {
                 &normals,
                 SheetScale { noise, ..sheet },
                 self.foreground,
-                plant_height,
+                heights,
                 &options.ncut,
             );
             if label != SegmentLabel::Leaf {
@@ -939,21 +994,8 @@ pub fn segment_scene(
         &options.ncut,
     );
     tracing::debug!(seconds = phase.elapsed().as_secs_f64(), "normalized cuts");
-    // Plant height above the floor (robust top), for pot detection.
-    let mut heights: Vec<f64> = plant_points
-        .positions
-        .iter()
-        .map(|p| match &foreground.floor {
-            Some(floor) => floor.signed_distance(p),
-            None => foreground.up.dot(&(p - foreground.plant_center)),
-        })
-        .collect();
-    heights.sort_by(f64::total_cmp);
-    let plant_height = heights
-        .get((heights.len() as f64 * 0.98) as usize)
-        .copied()
-        .unwrap_or(0.0)
-        .max(1e-9);
+    // The plant's heights, for pot detection.
+    let heights = PlantHeights::of(&plant_points.positions, &foreground);
 
     // Noise lowers a leaf's facing: compare with a flat sheet sampled like these points.
     let spacing = median_spacing(&plant_points);
@@ -969,7 +1011,7 @@ pub fn segment_scene(
         graph: &graph,
         min_facing,
         foreground: &foreground,
-        plant_height,
+        heights,
         options: &options.ncut,
     };
     let phase = Instant::now();
@@ -1051,7 +1093,7 @@ pub fn segment_scene(
             noise: 0.0,
             min_facing: MIN_FOUND_LEAF_FACING * flat_facing,
         },
-        plant_height,
+        heights,
         options,
     );
     tracing::debug!(
@@ -1293,6 +1335,61 @@ mod tests {
     }
 
     #[test]
+    fn without_a_floor_a_blob_on_the_stem_is_pot_only_low_on_the_plant() {
+        // A plant 1 m tall with no floor in its points (as the real Arabidopsis): its stem 5 cm
+        // from the cameras' axis, the cameras looking at its middle.
+        let stem: Vec<Point3<f64>> = (0..=200)
+            .map(|k| Point3::new(0.05, 0.0, k as f64 * 0.005))
+            .collect();
+        let foreground = upright(
+            PointClass::Plant,
+            stem.len(),
+            None,
+            Point3::new(0.0, 0.0, 0.5),
+        );
+        let heights = PlantHeights::of(&stem, &foreground);
+        assert!((heights.ground + 0.48).abs() < 0.01, "{heights:?}");
+        assert!((heights.top - 0.96).abs() < 0.01, "{heights:?}");
+        // A compact blob of the stem's halo (8 mm across, normals every way): at one distance
+        // from the axis, as a piece of a pot's wall is.
+        let label = |z: f64| {
+            let points: Vec<Point3<f64>> = (0..60)
+                .map(|k| {
+                    Point3::new(
+                        0.05 + 0.004 * jitter(k),
+                        0.004 * jitter(k + 100),
+                        z + 0.004 * jitter(k + 200),
+                    )
+                })
+                .collect();
+            let normals: Vec<Vector3<f64>> = (0..60)
+                .map(|k| {
+                    Vector3::new(jitter(k + 300), jitter(k + 400), jitter(k + 500))
+                        .try_normalize(1e-9)
+                        .unwrap_or_else(Vector3::z)
+                })
+                .collect();
+            classify(
+                &Shape::of(points.iter().copied()),
+                &points,
+                &normals,
+                SheetScale {
+                    noise: 0.001,
+                    min_facing: MIN_LEAF_FACING,
+                },
+                &foreground,
+                heights,
+                &NcutOptions::default(),
+            )
+        };
+        // Just below the point the cameras look at: mid-plant, not low (heights measured from
+        // that point called it low).
+        assert_eq!(label(0.45), SegmentLabel::Other);
+        // In the plant's lowest third: low, and at one distance from the axis.
+        assert_eq!(label(0.1), SegmentLabel::Pot);
+    }
+
+    #[test]
     fn a_small_leaf_the_stem_test_took_whole_is_found_and_its_twig_and_stem_are_not() {
         let spacing = 0.002;
         let noise = 0.0002;
@@ -1356,7 +1453,10 @@ mod tests {
                 noise: 0.0,
                 min_facing: 0.85,
             },
-            0.5,
+            PlantHeights {
+                ground: 0.0,
+                top: 0.5,
+            },
             &options,
         );
         let sizes: Vec<usize> = parts.segments.iter().map(|s| s.num_points).collect();
@@ -1451,7 +1551,10 @@ mod tests {
             graph: &graph,
             min_facing: MIN_LEAF_FACING,
             foreground: &foreground,
-            plant_height: 0.4,
+            heights: PlantHeights {
+                ground: 0.0,
+                top: 0.4,
+            },
             options: &options.ncut,
         };
         let stacked: Vec<u32> = (0..leaves as u32).collect();
