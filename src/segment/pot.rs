@@ -99,7 +99,7 @@ fn inside_depth(
     points: &[Point3<f64>],
     up: &Vector3<f64>,
 ) -> Option<f64> {
-    if !(pot.radius > 0.0) {
+    if pot.radius.is_nan() || pot.radius <= 0.0 {
         return None;
     }
     let mut depths: Vec<f64> = points
