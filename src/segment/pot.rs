@@ -342,12 +342,7 @@ mod tests {
             })
             .collect();
         // Soil a centimetre below the rim, and a stem standing on it.
-        let soil: Vec<Point3<f64>> = (0..200)
-            .map(|_| {
-                let (r, a) = (0.07 * rng.range(0.0, 1.0f64).sqrt(), rng.range(0.0, 6.3));
-                Point3::new(r * a.cos(), r * a.sin(), 0.11 + rng.range(-0.002, 0.002))
-            })
-            .collect();
+        let soil = soil_disc(&mut rng, 200);
         let stem = |from: f64| -> Vec<Point3<f64>> {
             (0..1000)
                 .map(|k| {
@@ -369,6 +364,16 @@ mod tests {
             pot_from_points(&wall, &voters(stem(0.0)), &up, &centre),
             None
         );
+    }
+
+    /// `n` points of soil inside a rim of radius 0.07, at z = 0.11 ± 2 mm.
+    fn soil_disc(rng: &mut crate::util::rng::Rng, n: usize) -> Vec<Point3<f64>> {
+        (0..n)
+            .map(|_| {
+                let (r, a) = (0.07 * rng.range(0.0, 1.0f64).sqrt(), rng.range(0.0, 6.3));
+                Point3::new(r * a.cos(), r * a.sin(), 0.11 + rng.range(-0.002, 0.002))
+            })
+            .collect()
     }
 
     /// Deterministic jitter within 2 mm.
@@ -419,12 +424,7 @@ mod tests {
             .map(|_| wall(rng.range(0.0, 0.12), rng.range(2.0, 3.4)))
             .collect();
         // Soil inside the rim, a little below it.
-        let soil: Vec<Point3<f64>> = (0..200)
-            .map(|_| {
-                let (r, a) = (0.07 * rng.range(0.0, 1.0f64).sqrt(), rng.range(0.0, 6.3));
-                Point3::new(r * a.cos(), r * a.sin(), 0.11 + rng.range(-0.002, 0.002))
-            })
-            .collect();
+        let soil = soil_disc(&mut rng, 200);
         // The floor's blotches, taken for plant, all around: 120 blobs of 100 points within
         // 0.3 of the axis, at the floor's height give or take its noise. With them among the
         // voters (the wall's voters starting at the floor) the axis came out 89 mm off.
