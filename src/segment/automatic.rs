@@ -410,7 +410,7 @@ const TOP_QUANTILE: f64 = 0.98;
 /// above the floor where the foreground found one; otherwise above the plant's ground, its
 /// points' [`GROUND_QUANTILE`] height. The point the cameras look at, which the heights were
 /// once measured from without a floor, is mid-plant: on the real Arabidopsis (no floor in its
-/// points) every segment below the lower two thirds of its 34 cm stem counted as low, and
+/// points) every segment in the lower two thirds of its 34 cm height counted as low, and
 /// pieces of the stem's halo were labelled pot.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct PlantHeights {
