@@ -15,6 +15,7 @@
 //! parent ([`sibling_of`]). Tubes the level sets merged into a neighbour all the way to their
 //! tips are found last, in the points no branch explains ([`recover_missed_tubes`]).
 
+use crate::util::geometry::distance_from_axis;
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap};
 
@@ -236,10 +237,7 @@ fn connected_skeleton(
 
     // Root: in the largest component (the others are joined to it), the lowest point among
     // those horizontally nearest the axis (for a piece, its point nearest the base).
-    let horizontal = |p: &Point3<f64>| {
-        let d = p - axis_point;
-        (d - up * up.dot(&d)).norm()
-    };
+    let horizontal = |p: &Point3<f64>| distance_from_axis(p, axis_point, up);
     let height = |p: &Point3<f64>| up.dot(&(p - axis_point));
     let candidates: Vec<usize> = groups[0].clone();
     let mut by_axis: Vec<f64> = candidates.iter().map(|&i| horizontal(&points[i])).collect();

@@ -3,6 +3,7 @@
 //! warp by affine ICP against the back-projected image boundary, deformation out of the plane
 //! toward the points, and texture from the best view.
 
+use crate::util::geometry::distance_from_axis;
 use nalgebra::{Matrix2, Matrix3, Point2, Point3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -566,10 +567,7 @@ pub fn leaf_frame(
         .filter(|(distance, _)| *distance <= 0.25 * (hi - lo));
     let distance_to_support = |p: &Point3<f64>| match branch_at_end {
         Some((_, branch_point)) => (p - branch_point).norm(),
-        None => {
-            let d = p - plant.axis_point_near(p);
-            (d - plant.up * plant.up.dot(&d)).norm()
-        }
+        None => distance_from_axis(p, &plant.axis_point_near(p), &plant.up),
     };
     let support = branch_at_end.map_or_else(|| plant.axis_point_near(&shape.centroid), |b| b.1);
     let away = shape.centroid - support;

@@ -24,6 +24,7 @@ use crate::graph::points::PointSet;
 use crate::graph::shape::Shape;
 use crate::graph::{GraphOptions, PointGraph, ViewData};
 use crate::scene::{Scene, SceneError};
+use crate::util::geometry::distance_from_axis;
 use crate::util::progress::Progress;
 use crate::util::stats::median;
 
@@ -616,31 +617,35 @@ const PLANT_REACH_QUANTILE: f64 = 0.95;
 /// Labels other the leaf segments whose points the photos do not show alike
 /// ([`super::photometric`]), judging more strictly those that stand upright by the plant's
 /// axis, as the stereo halo along its main stem does ([`super::photometric::stands_by_the_axis`];
-/// the axis is the vertical through `foreground.plant_center`, `reach` the plant's horizontal
-/// reach from it). Returns how many.
+/// the axis is the vertical through `foreground.plant_center`, the plant's horizontal reach
+/// from it the [`PLANT_REACH_QUANTILE`] of its `plant_positions`' distances). Returns how many.
 fn label_photo_inconsistent(
     scene: &Scene,
     points: &PointSet,
+    plant_positions: &[Point3<f64>],
     foreground: &Foreground,
-    reach: f64,
     segments: &mut [Segment],
     options: &PhotometricOptions,
 ) -> usize {
     if options.max_spread_ratio <= 0.0 {
         return 0;
     }
+    let mut reaches: Vec<f64> = plant_positions
+        .iter()
+        .map(|p| distance_from_axis(p, &foreground.plant_center, &foreground.up))
+        .collect();
+    let reach = crate::util::stats::quantile(&mut reaches, PLANT_REACH_QUANTILE);
     let leaves: Vec<usize> = (0..segments.len())
         .filter(|&s| segments[s].label == SegmentLabel::Leaf)
         .collect();
     let members: Vec<Vec<u32>> = leaves.iter().map(|&s| segments[s].points.clone()).collect();
     let spreads =
         super::photometric::brightness_spread(scene, points, &members, options.samples_per_segment);
-    let upright: Vec<bool> = members
+    let upright: Vec<bool> = leaves
         .iter()
-        .map(|members| {
-            let shape = Shape::of(members.iter().map(|&p| points.positions[p as usize]));
+        .map(|&s| {
             super::photometric::stands_by_the_axis(
-                &shape,
+                &segments[s].shape,
                 &foreground.plant_center,
                 &foreground.up,
                 reach,
@@ -1112,19 +1117,11 @@ pub fn segment_scene(
         "segments on the pot's wall"
     );
     let phase = Instant::now();
-    let mut reaches: Vec<f64> = plant_points
-        .positions
-        .iter()
-        .map(|p| {
-            super::photometric::distance_from_axis(p, &foreground.plant_center, &foreground.up)
-        })
-        .collect();
-    let plant_reach = crate::util::stats::quantile(&mut reaches, PLANT_REACH_QUANTILE);
     let photo_inconsistent = label_photo_inconsistent(
         scene,
         &points,
+        &plant_points.positions,
         &foreground,
-        plant_reach,
         &mut segments,
         &options.photometric,
     );

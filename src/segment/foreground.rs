@@ -6,6 +6,7 @@
 //! plant's vertical axis) are labelled per point; small isolated clusters are outliers. The pot
 //! stays in the foreground and is labelled later from its segments' shape.
 
+use crate::util::geometry::distance_from_axis;
 use nalgebra::{Point3, Vector3};
 use serde::Serialize;
 
@@ -323,10 +324,7 @@ pub fn separate_foreground(
     }
 
     // Horizontal distance from the vertical axis through the look-at point.
-    let horizontal = |p: &Point3<f64>| {
-        let d = p - look_at;
-        (d - up * up.dot(&d)).norm()
-    };
+    let horizontal = |p: &Point3<f64>| distance_from_axis(p, &look_at, &up);
     let camera_radius = median(centers.iter().map(horizontal)).unwrap_or(0.0);
     let radius_limit = options.max_radius_fraction * camera_radius.max(1e-9);
     for (i, p) in points.positions.iter().enumerate() {

@@ -38,6 +38,7 @@ use crate::graph::neighbours::Neighbours;
 use crate::graph::points::PointSet;
 use crate::graph::shape::Shape;
 use crate::scene::Scene;
+use crate::util::geometry::distance_from_axis;
 
 /// Settings of the photometric leaf test.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -228,12 +229,6 @@ fn spreads_of(
             crate::util::stats::median(spreads)
         })
         .collect()
-}
-
-/// Distance of `point` from the plant's axis: the line through `axis_point` along `up` (unit).
-pub fn distance_from_axis(point: &Point3<f64>, axis_point: &Point3<f64>, up: &Vector3<f64>) -> f64 {
-    let offset = point - axis_point;
-    (offset - up * up.dot(&offset)).norm()
 }
 
 /// Whether a segment of principal shape `shape` stands upright by the plant's axis (through

@@ -6,7 +6,7 @@
 use nalgebra::{Point3, Vector3};
 
 use super::foreground::{Foreground, PointClass};
-use crate::util::geometry::concentric_circle_centre;
+use crate::util::geometry::{concentric_circle_centre, distance_from_axis};
 
 /// The pot as far as the skeleton needs it: its vertical axis, rim and radius.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -105,9 +105,8 @@ fn inside_depth(
     let mut depths: Vec<f64> = points
         .iter()
         .filter_map(|p| {
-            let d = p - pot.rim_centre;
-            let depth = -up.dot(&d);
-            let across = (d + up * depth).norm();
+            let depth = up.dot(&(pot.rim_centre - p));
+            let across = distance_from_axis(p, &pot.rim_centre, up);
             (depth > 0.0 && depth <= height && across < INSIDE_SHARE * pot.radius)
                 .then_some(depth / pot.radius)
         })
@@ -260,10 +259,7 @@ pub fn radial_mean_and_spread(
 ) -> (f64, f64) {
     let radial: Vec<f64> = points
         .iter()
-        .map(|p| {
-            let d = p - axis_point;
-            (d - up * up.dot(&d)).norm()
-        })
+        .map(|p| distance_from_axis(p, axis_point, up))
         .collect();
     let n = radial.len() as f64;
     let mean = radial.iter().sum::<f64>() / n;

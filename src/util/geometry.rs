@@ -2,6 +2,12 @@
 
 use nalgebra::{Matrix3, Point3, Vector3};
 
+/// Distance of `point` from the vertical axis through `axis_point` along the unit `up`.
+pub fn distance_from_axis(point: &Point3<f64>, axis_point: &Point3<f64>, up: &Vector3<f64>) -> f64 {
+    let offset = point - axis_point;
+    (offset - up * up.dot(&offset)).norm()
+}
+
 /// Any unit vector perpendicular to `v`.
 pub fn any_perpendicular(v: &Vector3<f64>) -> Vector3<f64> {
     let helper = if v.x.abs() < 0.9 {
