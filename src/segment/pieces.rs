@@ -1,15 +1,16 @@
 //! Pieces of one leaf joined across a gap. From photos, stereo samples a small leaf in patches,
 //! and the stem test takes a band of its points (a fold, a noisy strip): the leaf then reaches
-//! the leaf test as two or three segments a few point spacings apart, none of which holds half
-//! of the leaf. Region merging (the sheet merge of [`super::automatic`]) needs a shared border
-//! in the kNN graph and never sees them. Two leaf segments are joined when both are pieces
-//! (smaller than half the plant's typical leaf, larger than a crumb), they lie within a few
-//! spacings of each other, their union is no longer than the plant's typical or longer leaves
-//! ([`longest_leaf_length`]), and the union is about as smooth a sheet as the rougher piece
-//! alone: pieces of one leaf continue one surface, while neighbouring leaves meet at an angle
-//! or at another height and their union is rougher than either. On medium photo plants (seeds 5 and 9, where the rule was found) the union of
-//! two pieces of one leaf had 0.93–1.2 times the rougher piece's absolute residual, that of two
-//! neighbouring leaves 1.25–5.5 times.
+//! the leaf test as two or three segments a few point spacings apart, often none of which holds
+//! half of the leaf, or as most of the leaf and a fragment of it (a tip, a lobe). Region
+//! merging (the sheet merge of [`super::automatic`]) needs a shared border in the kNN graph and
+//! never sees them. Two leaf segments larger than a crumb are joined when at least one of them
+//! is a piece (smaller than half the plant's typical leaf), they lie within a few spacings of
+//! each other, their union is no longer than the plant's typical or longer leaves
+//! ([`longest_leaf_length`]), and the union is about as smooth a sheet as the rougher of the
+//! two alone: pieces of one leaf continue one surface, while neighbouring leaves meet at an
+//! angle or at another height and their union is rougher than either. On medium photo plants
+//! (seeds 5 and 9, where the rule was found) the union of two pieces of one leaf had 0.93–1.2
+//! times the rougher piece's absolute residual, that of two neighbouring leaves 1.25–5.5 times.
 
 use nalgebra::Point3;
 
@@ -77,9 +78,39 @@ fn roughness(positions: &[Point3<f64>], members: &[u32]) -> (Shape, f64) {
     (shape, relative * shape.length())
 }
 
+/// What [`join_leaf_pieces`] measures of a leaf segment.
+struct Member {
+    /// Search tree over its points (`None` without points).
+    tree: Option<Neighbours>,
+    /// Bounding sphere: centroid and radius.
+    centre: Point3<f64>,
+    radius: f64,
+    /// Absolute roughness ([`roughness`]).
+    rough: f64,
+}
+
+impl Member {
+    fn of(positions: &[Point3<f64>], members: &[u32]) -> Self {
+        let sum = members.iter().fold(nalgebra::Vector3::zeros(), |acc, &i| {
+            acc + positions[i as usize].coords
+        });
+        let centre = Point3::from(sum / members.len().max(1) as f64);
+        let radius = members
+            .iter()
+            .map(|&i| (positions[i as usize] - centre).norm())
+            .fold(0.0, f64::max);
+        Self {
+            tree: Neighbours::new(members.iter().map(|&i| positions[i as usize])).ok(),
+            centre,
+            radius,
+            rough: roughness(positions, members).1,
+        }
+    }
+}
+
 /// Joins pieces of one leaf (see the module docs) among the leaf-labelled `segments`, in place,
 /// smoothest union first and again until nothing joins (a leaf in three pieces becomes one):
-/// a joined piece's points go to the other piece, the emptied segment is removed and the ids
+/// the later segment's points go to the earlier one, the emptied segment is removed and the ids
 /// and `point_segment` (segment index per point) renumbered. `spacing` is the points' median
 /// spacing. Returns the number of joins.
 pub fn join_leaf_pieces(
@@ -97,51 +128,44 @@ pub fn join_leaf_pieces(
     let longest = longest_leaf_length(segments, typical, limit);
     let gap = PIECE_GAP_SPACINGS * spacing;
     let mut joins = 0;
+    // Per segment, kept until a join changes it: its points' search tree, bounding sphere
+    // (centroid, radius, to skip pairs that cannot come near) and roughness.
+    let mut cache: Vec<Option<Member>> = (0..segments.len()).map(|_| None).collect();
     loop {
-        let pieces: Vec<usize> = (0..segments.len())
+        // Leaf segments above the crumb floor; of any two joined, one is a piece.
+        let members: Vec<usize> = (0..segments.len())
             .filter(|&s| {
                 let size = segments[s].points.len() as f64;
-                segments[s].label == SegmentLabel::Leaf && size < limit && size >= least.max(1.0)
+                segments[s].label == SegmentLabel::Leaf && size >= least.max(1.0)
             })
             .collect();
-        let trees: Vec<Option<Neighbours>> = pieces
-            .iter()
-            .map(|&s| {
-                Neighbours::new(segments[s].points.iter().map(|&i| positions[i as usize])).ok()
-            })
-            .collect();
-        // Bounding spheres (centroid, radius), to skip pairs that cannot come near.
-        let spheres: Vec<(Point3<f64>, f64)> = pieces
-            .iter()
-            .map(|&s| {
-                let members = &segments[s].points;
-                let sum = members.iter().fold(nalgebra::Vector3::zeros(), |acc, &i| {
-                    acc + positions[i as usize].coords
-                });
-                let centre = Point3::from(sum / members.len().max(1) as f64);
-                let radius = members
-                    .iter()
-                    .map(|&i| (positions[i as usize] - centre).norm())
-                    .fold(0.0, f64::max);
-                (centre, radius)
-            })
-            .collect();
-        let rough: Vec<f64> = pieces
-            .iter()
-            .map(|&s| roughness(positions, &segments[s].points).1)
-            .collect();
+        for &s in &members {
+            if cache[s].is_none() {
+                cache[s] = Some(Member::of(positions, &segments[s].points));
+            }
+        }
         // Candidate joins, smoothest union first.
         let mut candidates: Vec<(f64, usize, usize)> = Vec::new();
-        for a in 0..pieces.len() {
-            for b in a + 1..pieces.len() {
-                if (spheres[a].0 - spheres[b].0).norm() > spheres[a].1 + spheres[b].1 + gap {
+        for (k, &a) in members.iter().enumerate() {
+            for &b in &members[k + 1..] {
+                let (size_a, size_b) = (segments[a].points.len(), segments[b].points.len());
+                if size_a.min(size_b) as f64 >= limit {
                     continue;
                 }
-                let (Some(tree), true) = (&trees[b], rough[a].is_finite() && rough[b].is_finite())
-                else {
+                let (Some(ma), Some(mb)) = (&cache[a], &cache[b]) else {
                     continue;
                 };
-                let near = segments[pieces[a]]
+                if (ma.centre - mb.centre).norm() > ma.radius + mb.radius + gap
+                    || !(ma.rough.is_finite() && mb.rough.is_finite())
+                {
+                    continue;
+                }
+                // The smaller segment's points against the larger one's tree.
+                let (small, large) = if size_a <= size_b { (a, mb) } else { (b, ma) };
+                let Some(tree) = &large.tree else {
+                    continue;
+                };
+                let near = segments[small]
                     .points
                     .iter()
                     .map(|&i| tree.nearest_one(&positions[i as usize]).distance())
@@ -149,16 +173,16 @@ pub fn join_leaf_pieces(
                 if near > gap {
                     continue;
                 }
-                let union: Vec<u32> = segments[pieces[a]]
+                let union: Vec<u32> = segments[a]
                     .points
                     .iter()
-                    .chain(&segments[pieces[b]].points)
+                    .chain(&segments[b].points)
                     .copied()
                     .collect();
                 let (shape, union_rough) = roughness(positions, &union);
-                let growth = union_rough / rough[a].max(rough[b]).max(1e-300);
+                let growth = union_rough / ma.rough.max(mb.rough).max(1e-300);
                 if growth <= PIECE_UNION_ROUGHNESS && shape.length() <= longest {
-                    candidates.push((growth, pieces[a], pieces[b]));
+                    candidates.push((growth, a, b));
                 }
             }
         }
@@ -181,9 +205,13 @@ pub fn join_leaf_pieces(
             break;
         }
         for (s, segment) in segments.iter_mut().enumerate() {
-            if touched[s] && !segment.points.is_empty() {
-                segment.shape = Shape::of(segment.points.iter().map(|&i| positions[i as usize]));
-                segment.num_points = segment.points.len();
+            if touched[s] {
+                cache[s] = None;
+                if !segment.points.is_empty() {
+                    segment.shape =
+                        Shape::of(segment.points.iter().map(|&i| positions[i as usize]));
+                    segment.num_points = segment.points.len();
+                }
             }
         }
     }
@@ -406,6 +434,62 @@ mod tests {
         assert_eq!(joins, 1);
         assert_eq!(segments.len(), 6);
         assert_eq!(segments[5].num_points, n_left + n_right);
+    }
+
+    #[test]
+    fn a_fragment_beside_the_rest_of_its_leaf_is_joined() {
+        // A typical-size leaf whose tip (past x = 18 mm) stereo cut off by a 3 mm band: most
+        // of the leaf in one segment, its tip a piece beside it.
+        let whole = leaf(30.0, 16.0, [0.0, 0.0], 0.0, 18.0, 3.0, BEND);
+        let (body, tip): (Vec<_>, Vec<_>) = whole.into_iter().partition(|p| p.x < 0.018);
+        let (n_body, n_tip) = (body.len(), tip.len());
+        let mut groups = typical_leaves();
+        groups.push(body);
+        groups.push(tip);
+        let (mut segments, mut point_segment, positions) = segments_of(&groups);
+        let typical = typical_leaf_points(&segments);
+        assert!(
+            (n_body as f64) >= PIECE_SHARE_OF_TYPICAL_LEAF * typical,
+            "{n_body}"
+        );
+        assert!(
+            (n_tip as f64) < PIECE_SHARE_OF_TYPICAL_LEAF * typical,
+            "{n_tip}"
+        );
+        let joins = join_leaf_pieces(&mut segments, &mut point_segment, &positions, 1e-3);
+        assert_eq!(joins, 1);
+        assert_eq!(segments.len(), 3);
+        assert_eq!(segments[2].num_points, n_body + n_tip);
+    }
+
+    #[test]
+    fn a_small_leaf_beside_a_large_one_at_an_angle_is_not_joined() {
+        // A small leaf 3 mm beside a large leaf's side, rising from it at 40° (both along x):
+        // two leaves, though their union is no longer than the large one.
+        let large = leaf(30.0, 16.0, [0.0, 0.0], 0.0, 1e9, 0.0, BEND);
+        let (sin, cos) = 40f64.to_radians().sin_cos();
+        let small: Vec<Point3<f64>> = leaf(12.0, 6.0, [0.0, 0.0], 0.0, 1e9, 0.0, 0.0)
+            .into_iter()
+            .map(|p| {
+                let (x, across) = (p.x * 1e3, p.y * 1e3 + 6.0);
+                let base = BEND * x * x / 30.0;
+                Point3::new(x, 19.0 + across * cos, base + across * sin + p.z * 1e3) * 1e-3
+            })
+            .collect();
+        let closest = small
+            .iter()
+            .flat_map(|p| large.iter().map(move |q| (p - q).norm()))
+            .fold(f64::INFINITY, f64::min);
+        assert!(closest < PIECE_GAP_SPACINGS * 1e-3, "{closest}");
+        let mut groups = typical_leaves();
+        groups.push(large);
+        groups.push(small);
+        let (mut segments, mut point_segment, positions) = segments_of(&groups);
+        assert_eq!(
+            join_leaf_pieces(&mut segments, &mut point_segment, &positions, 1e-3),
+            0
+        );
+        assert_eq!(segments.len(), 4);
     }
 
     #[test]
