@@ -28,12 +28,12 @@ pub const PIECE_SHARE_OF_TYPICAL_LEAF: f64 = 0.5;
 pub const PIECE_GAP_SPACINGS: f64 = 5.0;
 
 /// The union of two pieces of one leaf is a sheet whose absolute (cubic height-field) residual
-/// is at most this many times the rougher piece's: one surface continued.
+/// is at most this many times that of the rougher of the two: one surface continued.
 pub const PIECE_UNION_ROUGHNESS: f64 = 1.2;
 
-/// How long the union of two pieces may be: as long as the plant's typical leaf (the length
-/// of the leaf segment of typical size, `typical` points) or as its longer leaves, whichever
-/// is longer. The longer leaves' length is the size-weighted upper quartile of the lengths of
+/// How long the union of two joined segments may be: as long as the plant's typical leaf
+/// (the length of the leaf segment of typical size, `typical` points) or as its longer
+/// leaves, whichever is longer. The longer leaves' length is the size-weighted upper quartile of the lengths of
 /// the leaf segments that are no pieces (`pieces` points or more): the length below which
 /// three quarters of their points lie, in segments ordered by length. The plant's leaves
 /// vary in length, and a leaf longer than the typical one splits as easily. With the typical
