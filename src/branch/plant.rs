@@ -8,7 +8,9 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::prune::{BarTest, RimTest, remove_barless_ends, remove_leaf_rims};
-use super::skeleton::{SkeletonError, SkeletonOptions, SkeletonStats, automatic_skeleton};
+use super::skeleton::{
+    PlantBase, SkeletonError, SkeletonOptions, SkeletonStats, automatic_skeleton_from,
+};
 use super::{BranchTree, CylinderMeshing};
 use crate::graph::neighbours::Neighbours;
 use crate::graph::points::PointSet;
@@ -172,18 +174,24 @@ pub fn pot_shape(segmentation: &Segmentation, labels: &Labels) -> Option<PotShap
     pot_from_points(&pot, &voters, &foreground.up, &foreground.plant_center)
 }
 
-/// Where the plant leaves the soil: on its vertical axis at the soil line. With a pot, the
-/// centre of its rim ([`pot_shape`]). Without one, the axis passes through the point the
-/// cameras look at and the soil line is the lowest of the skeleton points in the quarter
-/// nearest that axis; the cameras' point itself when there are none.
+/// Where the plant leaves the soil. With a pot, the centre of its rim ([`pot_shape`]): the
+/// stem's foot ([`PlantBase::Stem`]). Without one, only the soil line is known
+/// ([`PlantBase::SoilLine`]): the point on the vertical through the point the cameras look at,
+/// at the height of the lowest of the skeleton points in the quarter nearest that vertical;
+/// the cameras' point itself when there are none.
 pub fn plant_base(
     segmentation: &Segmentation,
     pot: Option<&PotShape>,
     skeleton_points: &[Point3<f64>],
-) -> Point3<f64> {
-    if let Some(pot) = pot {
-        return pot.rim_centre;
+) -> PlantBase {
+    match pot {
+        Some(pot) => PlantBase::Stem(pot.rim_centre),
+        None => PlantBase::SoilLine(soil_line_point(segmentation, skeleton_points)),
     }
+}
+
+/// The soil-line point of [`plant_base`] without a pot.
+fn soil_line_point(segmentation: &Segmentation, skeleton_points: &[Point3<f64>]) -> Point3<f64> {
     let foreground = &segmentation.foreground;
     let up = foreground.up;
     let centre = foreground.plant_center;
@@ -226,13 +234,13 @@ pub fn below_the_plant(
 }
 
 /// The points a plant's skeleton is built from and where it is rooted ([`skeleton_input`]).
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct SkeletonInput {
     pub points: Vec<Point3<f64>>,
     /// Per point: whether the thin-organ sweep found it (empty when the input does not say,
     /// see [`PointSet::thin_organ`]).
     pub thin_organ: Vec<bool>,
-    pub base: Point3<f64>,
+    pub base: PlantBase,
 }
 
 /// The points a plant's skeleton is built from and where it is rooted: the points that pass
@@ -249,7 +257,9 @@ pub fn skeleton_input(
     let points: Vec<Point3<f64>> = indices.iter().map(|&i| set.positions[i as usize]).collect();
     let pot = pot_shape(segmentation, labels);
     let base = plant_base(segmentation, pot.as_ref(), &points);
-    indices.retain(|&i| !below_the_plant(&set.positions[i as usize], &up, &base, pot.as_ref()));
+    let base_point = base.point();
+    indices
+        .retain(|&i| !below_the_plant(&set.positions[i as usize], &up, &base_point, pot.as_ref()));
     SkeletonInput {
         points: indices.iter().map(|&i| set.positions[i as usize]).collect(),
         thin_organ: if set.thin_organ.is_empty() {
@@ -283,7 +293,7 @@ pub fn automatic_plant_skeleton(
     let input = skeleton_input(segmentation, labels, &options.tube);
     let up = segmentation.foreground.up;
     let (mut tree, mut stats) =
-        automatic_skeleton(&input.points, &up, &input.base, &options.skeleton)?;
+        automatic_skeleton_from(&input.points, &up, &input.base, &options.skeleton)?;
     stem_rises(&tree, &up)?;
     let positions = &segmentation.points.positions;
     let sheets: Vec<(Point3<f64>, u32)> = (0..positions.len().min(labels.segment_of.len()))

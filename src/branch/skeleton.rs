@@ -3,7 +3,8 @@
 //!
 //! Geodesic level sets (Verroust & Lazarus 2000; Xu et al. 2007): a kNN graph over the points
 //! (components joined across small gaps), Dijkstra distances from the root (the lowest point
-//! near the plant's axis), points binned by distance into levels of a few point spacings, the
+//! near the plant's axis; without a pot, the point nearest the soil line under the point the
+//! cameras look at, [`PlantBase`]), points binned by distance into levels of a few point spacings, the
 //! connected pieces of each level become nodes at their centroids, and each node's parent is
 //! the piece its points' shortest paths come from. The node tree is split into branches by the
 //! longest-path rule (the deepest child continues the branch; the others start child
@@ -125,7 +126,46 @@ pub fn automatic_skeleton(
     root: &Point3<f64>,
     options: &SkeletonOptions,
 ) -> Result<(BranchTree, SkeletonStats), SkeletonError> {
-    let connected = connected_skeleton(points, up, root, options, Role::Plant)?;
+    automatic_skeleton_from(points, up, &PlantBase::Stem(*root), options)
+}
+
+/// Where a plant's skeleton is rooted.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PlantBase {
+    /// Where the stem leaves the soil, known (the centre of a pot's rim, on the plant's
+    /// vertical axis): the tree grows from the lowest points near that axis, and a stem that
+    /// does not reach down to the point is drawn on to it.
+    Stem(Point3<f64>),
+    /// Only a point of the soil line, under the point the cameras look at (no pot to say
+    /// where the stem stands): a plant placed off that axis, or leaning, has its stem's foot
+    /// elsewhere, and the points nearest the axis may be its top. The tree grows from the
+    /// point of the plant nearest this one, and a stem that does not reach the soil line is
+    /// drawn straight down to it.
+    SoilLine(Point3<f64>),
+}
+
+impl PlantBase {
+    /// The base point.
+    pub fn point(&self) -> Point3<f64> {
+        match self {
+            PlantBase::Stem(p) | PlantBase::SoilLine(p) => *p,
+        }
+    }
+}
+
+/// [`automatic_skeleton`] rooted as `base` says ([`PlantBase`]).
+pub fn automatic_skeleton_from(
+    points: &[Point3<f64>],
+    up: &Vector3<f64>,
+    base: &PlantBase,
+    options: &SkeletonOptions,
+) -> Result<(BranchTree, SkeletonStats), SkeletonError> {
+    let role = match base {
+        PlantBase::Stem(_) => Role::Plant,
+        PlantBase::SoilLine(_) => Role::PlantOnSoilLine,
+    };
+    let root = &base.point();
+    let connected = connected_skeleton(points, up, root, options, role)?;
     let mut branches = connected.tree.branches;
     let mut stats = connected.stats;
     stats.pieces_bridged = bridge_pieces(
@@ -155,6 +195,10 @@ enum Role {
     /// The whole plant: the root is the lowest point near the axis, and the stem is drawn on
     /// to the plant's base when they are more than a level width apart.
     Plant,
+    /// The whole plant over a soil-line point ([`PlantBase::SoilLine`]): the root is the
+    /// point nearest it, and the stem is drawn straight down to the soil line when it ends
+    /// more than a level width above it.
+    PlantOnSoilLine,
     /// A piece of tube to be bridged to the plant: the root is its point nearest the base.
     Piece,
 }
@@ -236,7 +280,8 @@ fn connected_skeleton(
     }
 
     // Root: in the largest component (the others are joined to it), the lowest point among
-    // those horizontally nearest the axis (for a piece, its point nearest the base).
+    // those horizontally nearest the axis (over a soil-line point, and for a piece, the point
+    // nearest the base).
     let horizontal = |p: &Point3<f64>| distance_from_axis(p, axis_point, up);
     let height = |p: &Point3<f64>| up.dot(&(p - axis_point));
     let candidates: Vec<usize> = groups[0].clone();
@@ -255,7 +300,7 @@ fn connected_skeleton(
             })
             .unwrap_or(candidates[0]),
         // A piece grows from its end nearest the plant's base.
-        Role::Piece => candidates
+        Role::PlantOnSoilLine | Role::Piece => candidates
             .iter()
             .copied()
             .min_by(|&a, &b| {
@@ -450,11 +495,20 @@ fn connected_skeleton(
             parent_fraction = Some(anchor.fraction);
             stats.bases_reanchored += 1;
         }
-        if parent.is_none()
-            && role == Role::Plant
-            && (nodes[chain[0]].centroid - axis_point).norm() > level_width
-        {
-            attachment_point = Some(*axis_point);
+        if parent.is_none() {
+            let foot = nodes[chain[0]].centroid;
+            match role {
+                Role::Plant if (foot - axis_point).norm() > level_width => {
+                    attachment_point = Some(*axis_point);
+                }
+                Role::PlantOnSoilLine => {
+                    let above = up.dot(&(foot - axis_point));
+                    if above > level_width {
+                        attachment_point = Some(foot - up * above);
+                    }
+                }
+                _ => {}
+            }
         }
         let mut polyline: Vec<Point3<f64>> = Vec::with_capacity(chain.len() + 1);
         polyline.extend(attachment_point);
@@ -492,7 +546,7 @@ fn connected_skeleton(
         };
         let id = branch.id;
         if parent.is_none()
-            && role == Role::Plant
+            && role != Role::Piece
             && let Some(top) = stem_top(&chain, &nodes, points)
         {
             stem_split = Some((chain.clone(), polyline.clone(), top));
@@ -1589,6 +1643,81 @@ mod tests {
             &SkeletonOptions::default(),
         )
         .unwrap()
+    }
+
+    /// A stem whose foot stands 0.3 off the cameras' axis and that leans in toward it (its
+    /// top on the axis), with two side branches: the points nearest the axis are its top.
+    fn leaning_stem(rng: &mut Rng) -> Vec<Point3<f64>> {
+        let stem = [
+            Point3::new(0.3, 0.0, 0.05),
+            Point3::new(0.2, 0.0, 0.4),
+            Point3::new(0.0, 0.0, 1.0),
+        ];
+        let low = [Point3::new(0.25, 0.0, 0.225), Point3::new(0.25, 0.2, 0.35)];
+        let high = [Point3::new(0.1, 0.0, 0.7), Point3::new(0.1, -0.2, 0.8)];
+        let mut points = tube(&stem, 0.01, 10_000.0, rng);
+        points.extend(tube(&low, 0.006, 5_000.0, rng));
+        points.extend(tube(&high, 0.006, 5_000.0, rng));
+        points
+    }
+
+    #[test]
+    fn a_stem_off_the_cameras_axis_is_rooted_at_its_foot_over_a_soil_line() {
+        let mut rng = Rng::seed_from(11);
+        let points = leaning_stem(&mut rng);
+        let soil = PlantBase::SoilLine(Point3::origin());
+        let (tree, stats) =
+            automatic_skeleton_from(&points, &Vector3::z(), &soil, &SkeletonOptions::default())
+                .unwrap();
+        let main = &tree.branches[0];
+        assert!(main.parent.is_none());
+        // The stem runs from the soil line straight under its foot to its top.
+        let start = main.cylinder.skeleton.point_at_fraction(0.0);
+        let end = main.cylinder.skeleton.point_at_fraction(1.0);
+        assert!(
+            start.z.abs() < 1e-9 && (start.x - 0.3).abs() < 0.02,
+            "{start}"
+        );
+        assert!(end.z > 0.95 && end.x.hypot(end.y) < 0.03, "{end}");
+        // Along the way it follows the stem (its foot drawn straight down to the soil line).
+        let truth = [
+            Point3::new(0.3, 0.0, 0.0),
+            Point3::new(0.3, 0.0, 0.05),
+            Point3::new(0.2, 0.0, 0.4),
+            Point3::new(0.0, 0.0, 1.0),
+        ];
+        for k in 0..=20 {
+            let p = main.cylinder.skeleton.point_at_fraction(k as f64 / 20.0);
+            let off = truth
+                .windows(2)
+                .map(|w| crate::branch::spline::point_segment_distance(&p, &w[0], &w[1]))
+                .fold(f64::INFINITY, f64::min);
+            assert!(
+                off < 0.02,
+                "stem point {p} is {off} off the stem; {stats:?}"
+            );
+        }
+        // Both side branches hang from it (besides spurs of its ring).
+        let sides = tree
+            .branches
+            .iter()
+            .filter(|b| b.parent == Some(main.id) && b.cylinder.skeleton.length() > 0.2);
+        assert_eq!(sides.count(), 2, "{stats:?}");
+    }
+
+    #[test]
+    fn a_stem_off_the_axis_is_rooted_on_the_axis_at_a_known_base() {
+        // The same points with the stem's foot taken to be on the axis (a pot's rim centre):
+        // the tree grows from the lowest points near the axis, the stem's top, so its main
+        // branch does not run from the soil up to the top.
+        let mut rng = Rng::seed_from(11);
+        let points = leaning_stem(&mut rng);
+        let (tree, _) = skeleton_z_up(&points);
+        let main = &tree.branches[0];
+        let end = main.cylinder.skeleton.point_at_fraction(1.0);
+        let start = main.cylinder.skeleton.point_at_fraction(0.0);
+        assert!(start.x.hypot(start.y) < 1e-9, "{start}");
+        assert!(end.z < 0.9, "{end}");
     }
 
     #[test]
