@@ -83,6 +83,10 @@ pub struct SkeletonStats {
     /// Side branches removed as showing no bar in the photos ([`super::prune::BarTest`]).
     #[serde(default)]
     pub barless_pruned: usize,
+    /// Rooted over a soil-line point ([`PlantBase::SoilLine`]: no pot said where the stem
+    /// stands), not at a known stem foot.
+    #[serde(default)]
+    pub rooted_on_soil_line: bool,
 }
 
 /// Why no skeleton could be built.
@@ -168,6 +172,7 @@ pub fn automatic_skeleton_from(
     let connected = connected_skeleton(points, up, root, options, role)?;
     let mut branches = connected.tree.branches;
     let mut stats = connected.stats;
+    stats.rooted_on_soil_line = role == Role::PlantOnSoilLine;
     stats.pieces_bridged = bridge_pieces(
         &mut branches,
         points,
@@ -1669,6 +1674,7 @@ mod tests {
         let (tree, stats) =
             automatic_skeleton_from(&points, &Vector3::z(), &soil, &SkeletonOptions::default())
                 .unwrap();
+        assert!(stats.rooted_on_soil_line);
         let main = &tree.branches[0];
         assert!(main.parent.is_none());
         // The stem runs from the soil line straight under its foot to its top.
@@ -1712,7 +1718,8 @@ mod tests {
         // branch does not run from the soil up to the top.
         let mut rng = Rng::seed_from(11);
         let points = leaning_stem(&mut rng);
-        let (tree, _) = skeleton_z_up(&points);
+        let (tree, stats) = skeleton_z_up(&points);
+        assert!(!stats.rooted_on_soil_line);
         let main = &tree.branches[0];
         let end = main.cylinder.skeleton.point_at_fraction(1.0);
         let start = main.cylinder.skeleton.point_at_fraction(0.0);
