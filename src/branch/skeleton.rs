@@ -4,13 +4,13 @@
 //! Geodesic level sets (Verroust & Lazarus 2000; Xu et al. 2007): a kNN graph over the points
 //! (components joined across small gaps), Dijkstra distances from the root (the lowest point
 //! near the plant's axis; without a pot, the point nearest the soil line under the point the
-//! cameras look at, [`PlantBase`]), points binned by distance into levels of a few point spacings, the
-//! connected pieces of each level become nodes at their centroids, and each node's parent is
-//! the piece its points' shortest paths come from. The node tree is split into branches by the
-//! longest-path rule (the deepest child continues the branch; the others start child
-//! branches), short spurs are pruned, and each branch gets a spline through its smoothed
-//! nodes and a linear radius fitted to the points' distances from its axis. Where many
-//! branches leave one crowded place (a rosette's crown), a side branch's wandering base is
+//! cameras look at, [`PlantBase`]), points binned by distance into levels of a few point
+//! spacings, the connected pieces of each level become nodes at their centroids, and each
+//! node's parent is the piece its points' shortest paths come from. The node tree is split
+//! into branches by the longest-path rule (the deepest child continues the branch; the others
+//! start child branches), short spurs are pruned, and each branch gets a spline through its
+//! smoothed nodes and a linear radius fitted to the points' distances from its axis. Where
+//! many branches leave one crowded place (a rosette's crown), a side branch's wandering base is
 //! replaced by its own direction extended back to the parent's axis ([`reanchor_base`]); a
 //! branch that split off a neighbour it ran alongside is extended back to their common
 //! parent ([`sibling_of`]). Tubes the level sets merged into a neighbour all the way to their
