@@ -33,13 +33,13 @@ pub const PIECE_UNION_ROUGHNESS: f64 = 1.2;
 
 /// How long the union of two joined segments may be: as long as the plant's typical leaf
 /// (the length of the leaf segment of typical size, `typical` points) or as its longer
-/// leaves, whichever is longer. The longer leaves' length is the size-weighted upper quartile of the lengths of
-/// the leaf segments that are no pieces (`pieces` points or more): the length below which
-/// three quarters of their points lie, in segments ordered by length. The plant's leaves
-/// vary in length, and a leaf longer than the typical one splits as easily. With the typical
-/// leaf's length alone, one segment's, the pieces of longer leaves stayed apart (medium
-/// photos, seed 5: two leaves in two pieces each, unions 3 and 9 % longer than that segment,
-/// roughness growth 1.02 and 1.05). Infinite without leaf segments to measure.
+/// leaves, whichever is longer. The longer leaves' length is the size-weighted upper quartile
+/// of the lengths of the leaf segments that are no pieces (`pieces` points or more): the
+/// length below which three quarters of their points lie, in segments ordered by length. The
+/// plant's leaves vary in length, and a leaf longer than the typical one splits as easily.
+/// With the typical leaf's length alone, one segment's, the pieces of longer leaves stayed
+/// apart (medium photos, seed 5: two leaves in two pieces each, unions 3 and 9 % longer than
+/// that segment, roughness growth 1.02 and 1.05). Infinite without leaf segments to measure.
 fn longest_leaf_length(segments: &[Segment], typical: f64, pieces: f64) -> f64 {
     let typical_length = segments
         .iter()
