@@ -4,7 +4,8 @@
 //! almost every small leaf was called rough and left out (recall 0.003–0.038 on seeds 1–5).
 //! Measured on this plant: recall 0.616, precision 0.909 with the noise-aware sheet tests;
 //! 0.670 and 0.956 once leaf rims and small leaves the stem test took are given back
-//! (`segment::borders`).
+//! (`segment::borders`); 0.683 and 0.957 once those small leaves take back their own rims
+//! before the leaf test.
 
 mod common;
 
