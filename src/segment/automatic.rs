@@ -1476,6 +1476,37 @@ mod tests {
         assert_eq!(label(0.1), SegmentLabel::Pot);
     }
 
+    /// Runs `run` on the segmentation's parts for `positions`, all of them stem-class points in
+    /// no segment (points `spacing` apart); returns its result, the segments and each point's
+    /// segment.
+    fn with_stem_points<R>(
+        positions: Vec<Point3<f64>>,
+        spacing: f64,
+        run: impl FnOnce(&mut LeafParts<'_>, &PointSet) -> R,
+    ) -> (R, Vec<Segment>, Vec<Option<u32>>) {
+        let n = positions.len();
+        let points = green_points(positions);
+        let mut foreground = upright(
+            PointClass::Stem,
+            n,
+            Some(floor_at_zero()),
+            Point3::new(0.05, 0.05, 0.2),
+        );
+        let mut point_segment = vec![None; n];
+        let mut segments = Vec::new();
+        let mut noise_of_segment = Vec::new();
+        let mut parts = LeafParts {
+            positions: &points.positions,
+            foreground: &mut foreground,
+            point_segment: &mut point_segment,
+            segments: &mut segments,
+            noise_of_segment: &mut noise_of_segment,
+            spacing,
+        };
+        let result = run(&mut parts, &points);
+        (result, segments, point_segment)
+    }
+
     /// A strip cut from a thick stem's surface is bounded all round by the rest of the stem; a
     /// small leaf only where its twig joins it.
     #[test]
@@ -1499,28 +1530,14 @@ mod tests {
         let leaf: Vec<usize> = (leaf_start..positions.len()).collect();
         // Its twig from its base, down and away.
         positions.extend((1..=10).map(|k| Point3::new(0.09 - k as f64 * spacing, 0.0, 0.25)));
-        let n = positions.len();
-        let points = green_points(positions);
-        let mut foreground = upright(
-            PointClass::Stem,
-            n,
-            Some(floor_at_zero()),
-            Point3::new(0.05, 0.05, 0.2),
-        );
-        let mut point_segment = vec![None; n];
-        let mut segments = Vec::new();
-        let mut noise_of_segment = Vec::new();
-        let parts = LeafParts {
-            positions: &points.positions,
-            foreground: &mut foreground,
-            point_segment: &mut point_segment,
-            segments: &mut segments,
-            noise_of_segment: &mut noise_of_segment,
-            spacing,
-        };
-        let all = Neighbours::new(points.positions.iter().copied()).unwrap();
-        let on_stem = parts.bounded_share(&patch, &all);
-        let on_leaf = parts.bounded_share(&leaf, &all);
+        let (on_stem, on_leaf) = with_stem_points(positions, spacing, |parts, points| {
+            let all = Neighbours::new(points.positions.iter().copied()).unwrap();
+            (
+                parts.bounded_share(&patch, &all),
+                parts.bounded_share(&leaf, &all),
+            )
+        })
+        .0;
         assert!(
             on_stem > MAX_FOUND_LEAF_BOUNDED_SHARE,
             "stem patch {on_stem:.2}"
@@ -1559,31 +1576,16 @@ mod tests {
         // A twig along its long side, 2 mm below the rim.
         positions.extend((-6..=6).map(|k| Point3::new(k as f64 * spacing, 0.0045, 0.298)));
         let n = positions.len();
-        let points = green_points(positions);
-        let mut foreground = upright(
-            PointClass::Stem,
-            n,
-            Some(floor_at_zero()),
-            Point3::new(0.05, 0.05, 0.2),
-        );
-        let mut point_segment = vec![None; n];
-        let mut segments = Vec::new();
-        let mut noise_of_segment = Vec::new();
-        let parts = LeafParts {
-            positions: &points.positions,
-            foreground: &mut foreground,
-            point_segment: &mut point_segment,
-            segments: &mut segments,
-            noise_of_segment: &mut noise_of_segment,
-            spacing,
-        };
-        let noise_of = (0..n).map(|i| (i, noise)).collect();
-        let groups = parts.sheet_groups_with_rims(
-            &inner,
-            &vec![true; n],
-            &noise_of,
-            &BorderOptions::default(),
-        );
+        let groups = with_stem_points(positions, spacing, |parts, _| {
+            let noise_of = (0..n).map(|i| (i, noise)).collect();
+            parts.sheet_groups_with_rims(
+                &inner,
+                &vec![true; n],
+                &noise_of,
+                &BorderOptions::default(),
+            )
+        })
+        .0;
         assert_eq!(groups.len(), 1, "{groups:?}");
         assert!(inner.len() < leaf, "{} of {leaf} inner", inner.len());
         assert_eq!(
@@ -1629,39 +1631,24 @@ mod tests {
                 .enumerate()
                 .map(|(k, p)| p + Vector3::new(0.0, 0.0, 0.3 * noise * jitter(k + 3))),
         );
-        let n = positions.len();
-        let points = green_points(positions);
-        let mut foreground = upright(
-            PointClass::Stem,
-            n,
-            Some(floor_at_zero()),
-            Point3::new(0.05, 0.05, 0.2),
-        );
-        let mut point_segment = vec![None; n];
-        let mut segments = Vec::new();
-        let mut noise_of_segment = Vec::new();
         let options = SegmentOptions::default();
-        let mut parts = LeafParts {
-            positions: &points.positions,
-            foreground: &mut foreground,
-            point_segment: &mut point_segment,
-            segments: &mut segments,
-            noise_of_segment: &mut noise_of_segment,
-            spacing,
-        };
-        let found = parts.find_missed_leaves(
-            &points,
-            0.5 * noise,
-            20,
-            PlantHeights {
-                ground: 0.0,
-                top: 0.5,
-            },
-            &options,
-        );
-        let sizes: Vec<usize> = parts.segments.iter().map(|s| s.num_points).collect();
+        let ((found, sizes), segments, point_segment) =
+            with_stem_points(positions, spacing, |parts, points| {
+                let found = parts.find_missed_leaves(
+                    points,
+                    0.5 * noise,
+                    20,
+                    PlantHeights {
+                        ground: 0.0,
+                        top: 0.5,
+                    },
+                    &options,
+                );
+                let sizes: Vec<usize> = parts.segments.iter().map(|s| s.num_points).collect();
+                parts.give_back_borders(0, &options.borders);
+                (found, sizes)
+            });
         assert_eq!(found, 1, "{sizes:?}");
-        parts.give_back_borders(0, &options.borders);
         let members = &segments[0].points;
         let on_leaf = members.iter().filter(|&&p| (p as usize) < leaf).count();
         let elsewhere = members.len() - on_leaf;
