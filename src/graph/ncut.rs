@@ -15,8 +15,9 @@ use serde::Serialize;
 
 use super::components::Adjacency;
 use super::lanczos::{LanczosOptions, fiedler_vector};
+use super::neighbours::Neighbours;
 use super::shape::Shape;
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
 
 /// Stop criteria of the recursion.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, serde::Deserialize)]
@@ -194,6 +195,48 @@ pub fn judge_split(
         }
     }
     None
+}
+
+/// The best two-way normalized cut of a group of points by their facing: a graph joins each
+/// point to its `neighbours` nearest, weighting each pair by how alike their `normals` face,
+/// `exp(−(1 − |nᵢ·nⱼ|) / facing_scale)`, so two leaves that touch at an angle are joined by weak
+/// edges along a short contact. Returns the lowest-Ncut sweep split with at least `min_side`
+/// points a side ([`best_sweep_split`]), or `None` when the group is too small or its graph
+/// falls apart (then its parts need no cut).
+pub fn facing_bisection(
+    positions: &[Point3<f64>],
+    normals: &[Vector3<f64>],
+    neighbours: usize,
+    facing_scale: f64,
+    min_side: usize,
+) -> Option<Split> {
+    let n = positions.len();
+    if n < 2 * min_side.max(1) || normals.len() != n || facing_scale <= 0.0 {
+        return None;
+    }
+    let index = Neighbours::new(positions.iter().copied()).ok()?;
+    let mut pairs = std::collections::BTreeSet::new();
+    for a in 0..n {
+        for near in index.around(a, neighbours) {
+            if near.index != a {
+                pairs.insert((a.min(near.index) as u32, a.max(near.index) as u32));
+            }
+        }
+    }
+    let edges: Vec<(u32, u32, f64)> = pairs
+        .into_iter()
+        .map(|(a, b)| {
+            let agree = normals[a as usize].dot(&normals[b as usize]).abs();
+            // A floor keeps every degree positive, as the eigensolver needs.
+            (a, b, (-(1.0 - agree) / facing_scale).exp().max(1e-9))
+        })
+        .collect();
+    let adjacency = Adjacency::from_edges(n, edges.iter().copied());
+    if adjacency.components().count > 1 {
+        return None;
+    }
+    let (_, fiedler) = fiedler_vector(&adjacency, &LanczosOptions::default())?;
+    best_sweep_split(&adjacency, &fiedler, min_side)
 }
 
 /// Rounds of the two-plane assignment in [`two_sheet_split`].
@@ -393,6 +436,53 @@ mod tests {
             Adjacency::from_edges(2 * side * side, edges.into_iter()),
             positions,
         )
+    }
+
+    /// Two square patches of `side` × `side` points 1 apart, the second folded up by `fold`
+    /// radians about the line where they meet; each point with its patch's normal.
+    fn folded_patches(side: usize, fold: f64) -> (Vec<Point3<f64>>, Vec<Vector3<f64>>, usize) {
+        let mut positions = Vec::new();
+        let mut normals = Vec::new();
+        let (c, s) = (fold.cos(), fold.sin());
+        for i in 0..side {
+            for j in 0..side {
+                positions.push(Point3::new(j as f64, i as f64, 0.0));
+                normals.push(Vector3::z());
+            }
+        }
+        for i in 0..side {
+            for j in 1..=side {
+                let along = j as f64;
+                positions.push(Point3::new(
+                    side as f64 - 1.0 + along * c,
+                    i as f64,
+                    along * s,
+                ));
+                normals.push(Vector3::new(-s, 0.0, c));
+            }
+        }
+        (positions, normals, side * side)
+    }
+
+    #[test]
+    fn a_fold_between_two_facings_is_cut_and_a_flat_sheet_costs_more_to_cut() {
+        let (positions, normals, first) = folded_patches(10, 50f64.to_radians());
+        let facing_scale = 0.1;
+        let folded = facing_bisection(&positions, &normals, 8, facing_scale, 20).unwrap();
+        let side_of_first = folded.side[0];
+        for (i, side) in folded.side.iter().enumerate() {
+            assert_eq!(*side == side_of_first, i < first, "point {i}");
+        }
+        let (flat, flat_normals, _) = folded_patches(10, 0.0);
+        let whole = facing_bisection(&flat, &flat_normals, 8, facing_scale, 20).unwrap();
+        assert!(
+            folded.ncut < 0.25 * whole.ncut,
+            "folded {:.4} flat {:.4}",
+            folded.ncut,
+            whole.ncut
+        );
+        // Too few points for two sides of 20.
+        assert!(facing_bisection(&positions[..39], &normals[..39], 8, facing_scale, 20).is_none());
     }
 
     #[test]
