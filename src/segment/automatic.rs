@@ -1841,13 +1841,48 @@ mod tests {
         points
     }
 
+    /// Runs [`LeafParts::split_touching_leaves`] on leaf segments of the given `members` of
+    /// `positions` (index ranges, start and end) (2 mm spacing, 0.2 mm of noise); returns the cuts and the segments after.
+    fn cut_touching_leaves(
+        positions: Vec<Point3<f64>>,
+        members: &[(usize, usize)],
+    ) -> (usize, Vec<Segment>) {
+        let noise = 0.0002;
+        let options = SegmentOptions::default();
+        let (cuts, segments, _) = with_stem_points(positions, 0.002, |parts, points| {
+            for (s, &(start, end)) in members.iter().enumerate() {
+                parts.segments.push(Segment {
+                    id: s as u32,
+                    label: SegmentLabel::Leaf,
+                    leaf_id: None,
+                    points: Vec::new(),
+                    num_points: 0,
+                    shape: Shape::of(std::iter::once(Point3::origin())),
+                });
+                parts.noise_of_segment.push(0.5 * noise);
+                for i in start..end {
+                    parts.assign(i, s);
+                }
+                parts.refresh(s);
+            }
+            parts.split_touching_leaves(
+                points,
+                0.5 * noise,
+                PlantHeights {
+                    ground: 0.0,
+                    top: 0.5,
+                },
+                &options,
+            )
+        });
+        (cuts, segments)
+    }
+
     /// Two small leaves that leave one twig together, 70° apart and touching at their bases,
     /// in one leaf segment: cut into one segment per leaf. A smaller single leaf beside them is
     /// not tried; a single leaf with about as many points as the two, alone, is not cut.
     #[test]
     fn two_small_leaves_that_touch_at_their_bases_are_cut_apart_and_one_leaf_is_not() {
-        let spacing = 0.002;
-        let noise = 0.0002;
         let base = Point3::new(0.0, 0.0, 0.3);
         let mut positions = small_leaf(base, 0.0, 0.0, 0.022, 0.012, 0);
         let first = positions.len();
@@ -1868,63 +1903,14 @@ mod tests {
             "{first} and {}",
             both - first
         );
-        let options = SegmentOptions::default();
-        let (cuts, segments, _) = with_stem_points(positions, spacing, |parts, _| {
-            for (s, members) in [(0..both), (both..both + singles)].into_iter().enumerate() {
-                parts.segments.push(Segment {
-                    id: s as u32,
-                    label: SegmentLabel::Leaf,
-                    leaf_id: None,
-                    points: Vec::new(),
-                    num_points: 0,
-                    shape: Shape::of(std::iter::once(base)),
-                });
-                parts.noise_of_segment.push(0.5 * noise);
-                for i in members {
-                    parts.assign(i, s);
-                }
-                parts.refresh(s);
-            }
-            parts.split_touching_leaves(
-                &green_points(parts.positions.to_vec()),
-                0.5 * noise,
-                PlantHeights {
-                    ground: 0.0,
-                    top: 0.5,
-                },
-                &options,
-            )
-        });
+        let (cuts, segments) = cut_touching_leaves(positions, &[(0, both), (both, both + singles)]);
         assert_eq!(cuts, 1, "{segments:?}");
         assert_eq!(segments.len(), 3);
         assert_eq!(segments[1].num_points, singles, "the single leaf is whole");
         // Alone, the single leaf is the plant's typical leaf and is tried: not cut.
         let single = small_leaf(Point3::new(0.2, 0.0, 0.3), 0.0, 0.2, 0.044, 0.012, 900);
         let alone = single.len();
-        let (single_cuts, single_segments, _) = with_stem_points(single, spacing, |parts, _| {
-            parts.segments.push(Segment {
-                id: 0,
-                label: SegmentLabel::Leaf,
-                leaf_id: None,
-                points: Vec::new(),
-                num_points: 0,
-                shape: Shape::of(std::iter::once(base)),
-            });
-            parts.noise_of_segment.push(0.5 * noise);
-            for i in 0..alone {
-                parts.assign(i, 0);
-            }
-            parts.refresh(0);
-            parts.split_touching_leaves(
-                &green_points(parts.positions.to_vec()),
-                0.5 * noise,
-                PlantHeights {
-                    ground: 0.0,
-                    top: 0.5,
-                },
-                &options,
-            )
-        });
+        let (single_cuts, single_segments) = cut_touching_leaves(single, &[(0, alone)]);
         assert_eq!(single_cuts, 0, "{single_segments:?}");
         for segment in [&segments[0], &segments[2]] {
             assert_eq!(segment.label, SegmentLabel::Leaf);
