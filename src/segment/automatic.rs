@@ -1841,8 +1841,8 @@ mod tests {
         points
     }
 
-    /// Runs [`LeafParts::split_touching_leaves`] on leaf segments of the given `members` of
-    /// `positions` (index ranges, start and end) (2 mm spacing, 0.2 mm of noise); returns the cuts and the segments after.
+    /// Runs [`LeafParts::split_touching_leaves`] on one leaf segment per `(start, end)` range
+    /// of `positions` (2 mm spacing, 0.2 mm of noise); returns the cuts and the segments after.
     fn cut_touching_leaves(
         positions: Vec<Point3<f64>>,
         members: &[(usize, usize)],
