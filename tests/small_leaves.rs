@@ -6,7 +6,9 @@
 //! 0.670 and 0.956 once leaf rims and small leaves the stem test took are given back
 //! (`segment::borders`); 0.683 and 0.957 once those small leaves take back their own rims
 //! before the leaf test; 0.683 and 0.960 once a group bounded all round is not a leaf; 0.693
-//! and 0.954 once leaf segments holding touching small leaves are cut apart.
+//! and 0.954 once leaf segments holding touching small leaves are cut apart; 0.706 and 0.948
+//! once found leaves are judged at the size a second rim pass gives them and segments called
+//! other are judged again with normals from within the segment.
 
 mod common;
 
