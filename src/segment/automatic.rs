@@ -844,6 +844,36 @@ impl LeafParts<'_> {
         }
     }
 
+    /// Whether `group` passes the leaf test of leaves found among the stem test's points:
+    /// [`classify`] with each point's normal from its [`SHEET_SHAPE_NEIGHBOURS`] nearest within
+    /// the group (normals over all plant points mix in a small leaf's twig and neighbours),
+    /// against `min_facing` and the group's `noise`.
+    fn passes_found_leaf_test(
+        &self,
+        points: &PointSet,
+        group: &[usize],
+        noise: f64,
+        min_facing: f64,
+        heights: PlantHeights,
+        options: &NcutOptions,
+    ) -> bool {
+        let positions: Vec<Point3<f64>> = group.iter().map(|&i| self.positions[i]).collect();
+        let normals: Vec<nalgebra::Vector3<f64>> =
+            local_shape::local_shapes(&points.subset(group), SHEET_SHAPE_NEIGHBOURS)
+                .iter()
+                .map(|shape| shape.normal)
+                .collect();
+        classify(
+            &Shape::of(positions.iter().copied()),
+            &positions,
+            &normals,
+            SheetScale { noise, min_facing },
+            self.foreground,
+            heights,
+            options,
+        ) == SegmentLabel::Leaf
+    }
+
     /// The share of `group`'s points (sorted) with a point outside the group within two
     /// spacings; `all_points` indexes all the points.
     fn bounded_share(&self, group: &[usize], all_points: &Neighbours) -> f64 {
@@ -989,17 +1019,7 @@ impl LeafParts<'_> {
             }
             let noise = self.noise_of_segment[s];
             let is_leaf = |part: &[usize]| {
-                let positions: Vec<Point3<f64>> = part.iter().map(|&i| self.positions[i]).collect();
-                let shape = Shape::of(positions.iter().copied());
-                classify(
-                    &shape,
-                    &positions,
-                    &normals_of(part),
-                    SheetScale { noise, min_facing },
-                    self.foreground,
-                    heights,
-                    &options.ncut,
-                ) == SegmentLabel::Leaf
+                self.passes_found_leaf_test(points, part, noise, min_facing, heights, &options.ncut)
             };
             if !is_leaf(&a) && !is_leaf(&b) {
                 continue;
@@ -1072,25 +1092,15 @@ impl LeafParts<'_> {
             {
                 continue;
             }
-            let positions: Vec<Point3<f64>> = group.iter().map(|&i| self.positions[i]).collect();
-            let normals: Vec<nalgebra::Vector3<f64>> =
-                local_shape::local_shapes(&points.subset(&group), SHEET_SHAPE_NEIGHBOURS)
-                    .iter()
-                    .map(|s| s.normal)
-                    .collect();
-            let label = classify(
-                &self.segments[s].shape,
-                &positions,
-                &normals,
-                SheetScale {
-                    noise: self.noise_of_segment[s],
-                    min_facing,
-                },
-                self.foreground,
+            let noise = self.noise_of_segment[s];
+            if self.passes_found_leaf_test(
+                points,
+                &group,
+                noise,
+                min_facing,
                 heights,
                 &options.ncut,
-            );
-            if label == SegmentLabel::Leaf {
+            ) {
                 self.segments[s].label = SegmentLabel::Leaf;
                 relabelled.push(s);
             }
@@ -1187,31 +1197,23 @@ impl LeafParts<'_> {
             if self.bounded_share(&group, &all_points) > MAX_FOUND_LEAF_BOUNDED_SHARE {
                 continue;
             }
-            let positions: Vec<Point3<f64>> = group.iter().map(|&i| self.positions[i]).collect();
-            let normals: Vec<nalgebra::Vector3<f64>> =
-                local_shape::local_shapes(&points.subset(&group), SHEET_SHAPE_NEIGHBOURS)
-                    .iter()
-                    .map(|s| s.normal)
-                    .collect();
             let noise =
                 median(group.iter().filter_map(|i| noise_of.get(i).copied())).unwrap_or(0.0);
-            let shape = Shape::of(positions.iter().copied());
-            let label = classify(
-                &shape,
-                &positions,
-                &normals,
-                SheetScale { noise, min_facing },
-                self.foreground,
+            if !self.passes_found_leaf_test(
+                points,
+                &group,
+                noise,
+                min_facing,
                 heights,
                 &options.ncut,
-            );
-            if label != SegmentLabel::Leaf {
+            ) {
                 continue;
             }
+            let shape = Shape::of(group.iter().map(|&i| self.positions[i]));
             let s = self.segments.len();
             self.segments.push(Segment {
                 id: s as u32,
-                label,
+                label: SegmentLabel::Leaf,
                 leaf_id: None,
                 points: Vec::new(),
                 num_points: 0,
@@ -1340,11 +1342,9 @@ pub fn segment_scene(
 
     // Noise lowers a leaf's facing: compare with a flat sheet sampled like these points.
     let spacing = median_spacing(&plant_points);
-    let flat_facing = FlatSheet::like(
-        spacing,
-        median(graph.plane_rms.iter().copied()).unwrap_or(0.0),
-    )
-    .map_or(1.0, |sheet| sheet.facing(PLANE_NEIGHBOURS));
+    let plane_rms = median(graph.plane_rms.iter().copied()).unwrap_or(0.0);
+    let flat_facing =
+        FlatSheet::like(spacing, plane_rms).map_or(1.0, |sheet| sheet.facing(PLANE_NEIGHBOURS));
     let min_facing = MIN_LEAF_FACING * flat_facing;
     tracing::debug!(flat_facing, min_facing, "leaf facing threshold");
     let leaf_test = LeafTest {
@@ -1425,15 +1425,11 @@ pub fn segment_scene(
         "leaf rims given back"
     );
     let phase = Instant::now();
-    let typical = typical_leaf_points(leaf_parts.segments);
+    let min_found_points =
+        (MIN_FOUND_SHARE_OF_TYPICAL_LEAF * typical_leaf_points(leaf_parts.segments)) as usize;
     let before = leaf_parts.segments.len();
-    let found = leaf_parts.find_missed_leaves(
-        &points,
-        median(graph.plane_rms.iter().copied()).unwrap_or(0.0),
-        (MIN_FOUND_SHARE_OF_TYPICAL_LEAF * typical) as usize,
-        heights,
-        options,
-    );
+    let found =
+        leaf_parts.find_missed_leaves(&points, plane_rms, min_found_points, heights, options);
     tracing::debug!(
         seconds = phase.elapsed().as_secs_f64(),
         found,
@@ -1443,25 +1439,17 @@ pub fn segment_scene(
         let found: Vec<usize> = (before..leaf_parts.segments.len()).collect();
         leaf_parts.give_back_borders(&found, &options.borders);
     }
-    let relabelled = leaf_parts.rejudge_other_segments(
-        &points,
-        median(graph.plane_rms.iter().copied()).unwrap_or(0.0),
-        (MIN_FOUND_SHARE_OF_TYPICAL_LEAF * typical) as usize,
-        heights,
-        options,
-    );
+    let phase = Instant::now();
+    let relabelled =
+        leaf_parts.rejudge_other_segments(&points, plane_rms, min_found_points, heights, options);
+    leaf_parts.give_back_borders(&relabelled, &options.borders);
     tracing::debug!(
+        seconds = phase.elapsed().as_secs_f64(),
         relabelled = relabelled.len(),
         "small leaves among the segments called other"
     );
-    leaf_parts.give_back_borders(&relabelled, &options.borders);
     let phase = Instant::now();
-    let touching_cut = leaf_parts.split_touching_leaves(
-        &points,
-        median(graph.plane_rms.iter().copied()).unwrap_or(0.0),
-        heights,
-        options,
-    );
+    let touching_cut = leaf_parts.split_touching_leaves(&points, plane_rms, heights, options);
     tracing::debug!(
         seconds = phase.elapsed().as_secs_f64(),
         touching_cut,
@@ -1660,6 +1648,12 @@ mod tests {
     }
 
     /// The plane z = 0.
+    /// A plant from the ground at 0 to 0.5 m.
+    const HALF_METRE_PLANT: PlantHeights = PlantHeights {
+        ground: 0.0,
+        top: 0.5,
+    };
+
     fn floor_at_zero() -> Plane {
         Plane {
             normal: Vector3::z(),
@@ -1813,26 +1807,33 @@ mod tests {
         assert!(on_leaf < 0.5, "leaf {on_leaf:.2}");
     }
 
-    /// A leaf of a few dozen points whose rim did not pass the sheet test (on a small leaf the
-    /// rim's neighbourhoods reach onto the twig): the group of its inner sheet points takes the
-    /// rim back, and not the twig 2 mm below the rim.
-    #[test]
-    fn a_group_of_sheet_points_takes_back_its_rim_and_not_the_twig() {
+    /// A flat elliptic leaf at 0.3 m sampled every 2 mm with 0.2 mm of noise, `half_length` long
+    /// on either side and 4.5 mm wide on either side (`columns` grid columns either side of its
+    /// middle, rows −2..=2), and a twig along its long side 2 mm below the rim (`twig` points
+    /// either side). Returns the points (the leaf's first), the leaf points where `sheet(column,
+    /// row)` holds, each leaf point's column and the leaf's point count.
+    fn leaf_over_a_twig(
+        half_length: f64,
+        columns: i32,
+        twig: i32,
+        sheet: impl Fn(i32, i32) -> bool,
+    ) -> (Vec<Point3<f64>>, Vec<usize>, Vec<i32>, usize) {
         let spacing = 0.002;
         let noise = 0.0002;
         let mut positions = Vec::new();
-        let mut inner = Vec::new();
-        // An elliptic leaf 14 × 8 mm, flat at 0.3 m; its middle row and the next ones passed.
-        for i in -3i32..=3 {
+        let mut sheet_points = Vec::new();
+        let mut column = Vec::new();
+        for i in -columns..=columns {
             for j in -2i32..=2 {
                 let (u, v) = (i as f64 * spacing, j as f64 * spacing);
-                if (u / 0.0075).powi(2) + (v / 0.0045).powi(2) > 1.0 {
+                if (u / half_length).powi(2) + (v / 0.0045).powi(2) > 1.0 {
                     continue;
                 }
                 let k = positions.len();
-                if j.abs() <= 1 && i.abs() <= 2 {
-                    inner.push(k);
+                if sheet(i, j) {
+                    sheet_points.push(k);
                 }
+                column.push(i);
                 positions.push(Point3::new(
                     u + 0.3 * noise * jitter(k + 7),
                     v + 0.3 * noise * jitter(k + 11),
@@ -1841,19 +1842,38 @@ mod tests {
             }
         }
         let leaf = positions.len();
-        // A twig along its long side, 2 mm below the rim.
-        positions.extend((-6..=6).map(|k| Point3::new(k as f64 * spacing, 0.0045, 0.298)));
+        positions.extend((-twig..=twig).map(|k| Point3::new(k as f64 * spacing, 0.0045, 0.298)));
+        (positions, sheet_points, column, leaf)
+    }
+
+    /// [`LeafParts::sheet_groups_with_rims`] of `sheet_points` among `positions` (2 mm apart,
+    /// 0.2 mm of noise), every point a candidate.
+    fn rim_groups(
+        positions: Vec<Point3<f64>>,
+        sheet_points: &[usize],
+    ) -> Vec<(Vec<usize>, Vec<usize>)> {
         let n = positions.len();
-        let groups = with_stem_points(positions, spacing, |parts, _| {
-            let noise_of = (0..n).map(|i| (i, noise)).collect();
+        with_stem_points(positions, 0.002, |parts, _| {
+            let noise_of = (0..n).map(|i| (i, 0.0002)).collect();
             parts.sheet_groups_with_rims(
-                &inner,
+                sheet_points,
                 &vec![true; n],
                 &noise_of,
                 &BorderOptions::default(),
             )
         })
-        .0;
+        .0
+    }
+
+    /// A leaf of a few dozen points whose rim did not pass the sheet test (on a small leaf the
+    /// rim's neighbourhoods reach onto the twig): the group of its inner sheet points takes the
+    /// rim back, and not the twig 2 mm below the rim.
+    #[test]
+    fn a_group_of_sheet_points_takes_back_its_rim_and_not_the_twig() {
+        // An elliptic leaf 14 × 8 mm; its middle row and the next ones passed.
+        let (positions, inner, _, leaf) =
+            leaf_over_a_twig(0.0075, 3, 6, |i, j| j.abs() <= 1 && i.abs() <= 2);
+        let groups = rim_groups(positions, &inner);
         assert_eq!(groups.len(), 1, "{groups:?}");
         assert!(inner.len() < leaf, "{} of {leaf} inner", inner.len());
         for pass in [&groups[0].0, &groups[0].1] {
@@ -1919,16 +1939,7 @@ mod tests {
                 }
                 parts.refresh(s);
             }
-            parts.rejudge_other_segments(
-                points,
-                0.5 * noise,
-                20,
-                PlantHeights {
-                    ground: 0.0,
-                    top: 0.5,
-                },
-                &options,
-            )
+            parts.rejudge_other_segments(points, 0.5 * noise, 20, HALF_METRE_PLANT, &options)
         });
         assert_eq!(relabelled, vec![0]);
         let labels: Vec<SegmentLabel> = segments.iter().map(|s| s.label).collect();
@@ -1943,44 +1954,11 @@ mod tests {
     /// next stretch of the leaf; neither takes the twig 2 mm below the leaf.
     #[test]
     fn a_second_pass_takes_back_more_of_a_leaf_whose_sheet_points_lie_at_one_end() {
-        let spacing = 0.002;
-        let noise = 0.0002;
-        let mut positions = Vec::new();
-        let mut seed = Vec::new();
-        let mut column = Vec::new();
-        // An elliptic leaf 30 × 9 mm, flat at 0.3 m; its sheet points are the middle rows of
-        // its last four columns.
-        for i in -7i32..=7 {
-            for j in -2i32..=2 {
-                let (u, v) = (i as f64 * spacing, j as f64 * spacing);
-                if (u / 0.015).powi(2) + (v / 0.0045).powi(2) > 1.0 {
-                    continue;
-                }
-                let k = positions.len();
-                if i <= -4 && j.abs() <= 1 {
-                    seed.push(k);
-                }
-                column.push(i);
-                positions.push(Point3::new(
-                    u + 0.3 * noise * jitter(k + 7),
-                    v + 0.3 * noise * jitter(k + 11),
-                    0.3 + noise * jitter(k),
-                ));
-            }
-        }
-        let leaf = positions.len();
-        positions.extend((-8..=8).map(|k| Point3::new(k as f64 * spacing, 0.0045, 0.298)));
-        let n = positions.len();
-        let groups = with_stem_points(positions, spacing, |parts, _| {
-            let noise_of = (0..n).map(|i| (i, noise)).collect();
-            parts.sheet_groups_with_rims(
-                &seed,
-                &vec![true; n],
-                &noise_of,
-                &BorderOptions::default(),
-            )
-        })
-        .0;
+        // An elliptic leaf 30 × 9 mm; its sheet points are the middle rows of its last four
+        // columns.
+        let (positions, seed, column, leaf) =
+            leaf_over_a_twig(0.015, 7, 8, |i, j| i <= -4 && j.abs() <= 1);
+        let groups = rim_groups(positions, &seed);
         assert_eq!(groups.len(), 1, "{groups:?}");
         let (first, second) = &groups[0];
         let columns = |group: &[usize]| -> Vec<i32> {
@@ -2046,16 +2024,8 @@ mod tests {
         let options = SegmentOptions::default();
         let ((found, sizes), segments, point_segment) =
             with_stem_points(positions, spacing, |parts, points| {
-                let found = parts.find_missed_leaves(
-                    points,
-                    0.5 * noise,
-                    20,
-                    PlantHeights {
-                        ground: 0.0,
-                        top: 0.5,
-                    },
-                    &options,
-                );
+                let found =
+                    parts.find_missed_leaves(points, 0.5 * noise, 20, HALF_METRE_PLANT, &options);
                 let sizes: Vec<usize> = parts.segments.iter().map(|s| s.num_points).collect();
                 let all: Vec<usize> = (0..parts.segments.len()).collect();
                 parts.give_back_borders(&all, &options.borders);
@@ -2132,15 +2102,7 @@ mod tests {
                 }
                 parts.refresh(s);
             }
-            parts.split_touching_leaves(
-                points,
-                0.5 * noise,
-                PlantHeights {
-                    ground: 0.0,
-                    top: 0.5,
-                },
-                &options,
-            )
+            parts.split_touching_leaves(points, 0.5 * noise, HALF_METRE_PLANT, &options)
         });
         (cuts, segments)
     }
