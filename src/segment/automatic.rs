@@ -1082,11 +1082,12 @@ impl LeafParts<'_> {
             if self.segments[s].label != SegmentLabel::Other {
                 continue;
             }
-            let group: Vec<usize> = self.segments[s]
+            let mut group: Vec<usize> = self.segments[s]
                 .points
                 .iter()
                 .map(|&p| p as usize)
                 .collect();
+            group.sort_unstable();
             if group.len() < min_points.max(options.ncut.min_segment_points)
                 || self.bounded_share(&group, &all_points) > MAX_FOUND_LEAF_BOUNDED_SHARE
             {
@@ -1647,13 +1648,13 @@ mod tests {
         );
     }
 
-    /// The plane z = 0.
     /// A plant from the ground at 0 to 0.5 m.
     const HALF_METRE_PLANT: PlantHeights = PlantHeights {
         ground: 0.0,
         top: 0.5,
     };
 
+    /// The plane z = 0.
     fn floor_at_zero() -> Plane {
         Plane {
             normal: Vector3::z(),
