@@ -1059,9 +1059,9 @@ impl LeafParts<'_> {
     /// the six segments called other that hold at least 95 % of one true leaf, four failed on
     /// that facing alone (0.51–0.87), two on the sheet residual. After the second rim pass of
     /// found leaves, semi-dense smallleaf seeds 1–3: recall 0.765 / 0.675 / 0.625 → 0.768 /
-    /// 0.682 / 0.636 (with their rims given back), precision 0.917 / 0.927 / 0.898 → 0.917 /
-    /// 0.925 / 0.903; seeds 4–5 unchanged in recall (0.712, 0.668), precision 0.852 → 0.849
-    /// and 0.876. Returns the relabelled segments.
+    /// 0.682 / 0.639 (with their rims given back), precision 0.917 / 0.927 / 0.898 → 0.911 /
+    /// 0.925 / 0.903; seeds 4–5 (held out): recall 0.712 / 0.668 → 0.715 / 0.668, precision
+    /// 0.852 / 0.876 → 0.846 / 0.876. Returns the relabelled segments.
     fn rejudge_other_segments(
         &mut self,
         points: &PointSet,
