@@ -2174,11 +2174,9 @@ mod tests {
         (cuts, segments)
     }
 
-    /// Two small leaves that leave one twig together, 70° apart and touching at their bases,
-    /// in one leaf segment: cut into one segment per leaf. A smaller single leaf beside them is
-    /// not tried; a single leaf with about as many points as the two, alone, is not cut.
-    #[test]
-    fn two_small_leaves_that_touch_at_their_bases_are_cut_apart_and_one_leaf_is_not() {
+    /// Two small leaves 22 × 12 mm that leave one twig together, 70° apart and touching at
+    /// their bases, and where the second one's points start.
+    fn two_touching_small_leaves() -> (Vec<Point3<f64>>, usize) {
         let base = Point3::new(0.0, 0.0, 0.3);
         let mut positions = small_leaf(base, 0.0, 0.0, 0.022, 0.012, 0);
         let first = positions.len();
@@ -2190,6 +2188,34 @@ mod tests {
             0.012,
             500,
         ));
+        (positions, first)
+    }
+
+    /// Each segment is a leaf and holds (95 %) the points of one of the two leaves of
+    /// [`two_touching_small_leaves`], whose second leaf starts at point `first`.
+    fn assert_one_leaf_each<'a>(segments: impl IntoIterator<Item = &'a Segment>, first: usize) {
+        for segment in segments {
+            assert_eq!(segment.label, SegmentLabel::Leaf, "{segment:?}");
+            let on_first = segment
+                .points
+                .iter()
+                .filter(|&&p| (p as usize) < first)
+                .count();
+            let majority = on_first.max(segment.num_points - on_first);
+            assert!(
+                majority * 100 >= 95 * segment.num_points,
+                "{on_first} of {} on the first leaf",
+                segment.num_points
+            );
+        }
+    }
+
+    /// Two small leaves that leave one twig together, 70° apart and touching at their bases,
+    /// in one leaf segment: cut into one segment per leaf. A smaller single leaf beside them is
+    /// not tried; a single leaf with about as many points as the two, alone, is not cut.
+    #[test]
+    fn two_small_leaves_that_touch_at_their_bases_are_cut_apart_and_one_leaf_is_not() {
+        let (mut positions, first) = two_touching_small_leaves();
         let both = positions.len();
         let single = small_leaf(Point3::new(0.2, 0.0, 0.3), 0.0, 0.2, 0.036, 0.012, 900);
         let singles = single.len();
@@ -2208,38 +2234,17 @@ mod tests {
         let alone = single.len();
         let (single_cuts, single_segments) = cut_touching_leaves(single, &[(0, alone)]);
         assert_eq!(single_cuts, 0, "{single_segments:?}");
-        for segment in [&segments[0], &segments[2]] {
-            assert_eq!(segment.label, SegmentLabel::Leaf);
-            let on_first = segment
-                .points
-                .iter()
-                .filter(|&&p| (p as usize) < first)
-                .count();
-            let majority = on_first.max(segment.num_points - on_first);
-            assert!(
-                majority * 100 >= 95 * segment.num_points,
-                "{on_first} of {} on the first leaf",
-                segment.num_points
-            );
-        }
+        assert_one_leaf_each([&segments[0], &segments[2]], first);
     }
 
+    /// A segment the leaf test called other that holds two touching small leaves is cut into
+    /// two leaves; one that is a stem's tube is not cut and stays other.
     #[test]
     fn touching_small_leaves_called_other_are_cut_into_leaves_and_a_stem_stays_other() {
         // Two small leaves touching at their bases, 70° apart, in one segment the leaf test
         // called other; a leaf segment of one leaf sets the typical leaf; and a segment called
         // other that is a stem's tube, 5 mm in radius and 8 cm long, sampled all round.
-        let base = Point3::new(0.0, 0.0, 0.3);
-        let mut positions = small_leaf(base, 0.0, 0.0, 0.022, 0.012, 0);
-        let first = positions.len();
-        positions.extend(small_leaf(
-            base + Vector3::new(-0.002, 0.0, 0.0),
-            std::f64::consts::PI,
-            70f64.to_radians(),
-            0.022,
-            0.012,
-            500,
-        ));
+        let (mut positions, first) = two_touching_small_leaves();
         let both = positions.len();
         positions.extend(small_leaf(
             Point3::new(0.2, 0.0, 0.3),
@@ -2280,20 +2285,7 @@ mod tests {
         );
         assert_eq!(segments[2].label, SegmentLabel::Other, "the stem");
         assert_eq!(segments[2].num_points, n - leaves, "the stem is whole");
-        for segment in [&segments[0], &segments[3]] {
-            assert_eq!(segment.label, SegmentLabel::Leaf, "{segment:?}");
-            let on_first = segment
-                .points
-                .iter()
-                .filter(|&&p| (p as usize) < first)
-                .count();
-            let majority = on_first.max(segment.num_points - on_first);
-            assert!(
-                majority * 100 >= 95 * segment.num_points,
-                "{on_first} of {} on the first leaf",
-                segment.num_points
-            );
-        }
+        assert_one_leaf_each([&segments[0], &segments[3]], first);
     }
 
     #[test]
