@@ -761,6 +761,25 @@ struct LeafParts<'a> {
     spacing: f64,
 }
 
+/// How a group of points outside the leaf segments is judged a leaf: a small leaf the stem test
+/// took whole ([`LeafParts::find_missed_leaves`]), a segment the leaf test called other
+/// ([`LeafParts::rejudge_other_segments`]) or a side cut from one
+/// ([`LeafParts::split_touching_leaves`]). Such a group is a leaf where it has at least
+/// `min_points` (found leaves' [`MIN_FOUND_SHARE_OF_TYPICAL_LEAF`] of the typical leaf: among a
+/// plant of large leaves such small sheets are crumbs of stem or pot), a free edge
+/// ([`MAX_FOUND_LEAF_BOUNDED_SHARE`]) and passes the leaf test with normals from each point's
+/// neighbours within the group, facing at least [`MIN_FOUND_LEAF_FACING`] × a flat sheet's.
+struct FoundLeafJudge<'o> {
+    min_points: usize,
+    /// [`MIN_FOUND_LEAF_FACING`] × the facing of a flat sheet with the plant's spacing and noise.
+    min_facing: f64,
+    heights: PlantHeights,
+    options: &'o NcutOptions,
+    /// All the points, indexed for the bounded share; built at the first group that needs it
+    /// (`None` where the index could not be built: then no group is judged a leaf).
+    all_points: std::cell::OnceCell<Option<Neighbours>>,
+}
+
 /// Neighbours of the local shapes [`LeafParts::find_missed_leaves`] tells sheets by (as the
 /// stem test's normals).
 const SHEET_SHAPE_NEIGHBOURS: usize = 8;
@@ -844,18 +863,55 @@ impl LeafParts<'_> {
         }
     }
 
-    /// Whether `group` passes the leaf test of leaves found among the stem test's points:
-    /// [`classify`] with each point's normal from its [`SHEET_SHAPE_NEIGHBOURS`] nearest within
-    /// the group (normals over all plant points mix in a small leaf's twig and neighbours),
-    /// against `min_facing` and the group's `noise`.
-    fn passes_found_leaf_test(
+    /// The judge of found leaves on this plant ([`FoundLeafJudge`]), with groups of at least
+    /// `min_points` (and the smallest segment's); `None` where no flat sheet can be modelled at
+    /// the plant's spacing and `plane_rms`.
+    fn found_leaf_judge<'o>(
         &self,
+        plane_rms: f64,
+        min_points: usize,
+        heights: PlantHeights,
+        options: &'o NcutOptions,
+    ) -> Option<FoundLeafJudge<'o>> {
+        let flat = FlatSheet::like(self.spacing, plane_rms)?;
+        Some(FoundLeafJudge {
+            min_points: min_points.max(options.min_segment_points),
+            min_facing: MIN_FOUND_LEAF_FACING * flat.facing(SHEET_SHAPE_NEIGHBOURS),
+            heights,
+            options,
+            all_points: std::cell::OnceCell::new(),
+        })
+    }
+
+    /// Whether `group` (sorted), whose points' median local plane RMS is `noise`, is judged a
+    /// leaf by `judge`: its size, the leaf test ([`LeafParts::passes_found_leaf_test`]), then
+    /// its free edge.
+    fn is_found_leaf(
+        &self,
+        judge: &FoundLeafJudge,
         points: &PointSet,
         group: &[usize],
         noise: f64,
-        min_facing: f64,
-        heights: PlantHeights,
-        options: &NcutOptions,
+    ) -> bool {
+        group.len() >= judge.min_points
+            && self.passes_found_leaf_test(judge, points, group, noise)
+            && judge
+                .all_points
+                .get_or_init(|| Neighbours::new(self.positions.iter().copied()).ok())
+                .as_ref()
+                .is_some_and(|all| self.bounded_share(group, all) <= MAX_FOUND_LEAF_BOUNDED_SHARE)
+    }
+
+    /// Whether `group` passes the leaf test of found leaves: [`classify`] with each point's
+    /// normal from its [`SHEET_SHAPE_NEIGHBOURS`] nearest within the group (normals over all
+    /// plant points mix in a small leaf's twig and neighbours), against `judge`'s facing and
+    /// the group's `noise`.
+    fn passes_found_leaf_test(
+        &self,
+        judge: &FoundLeafJudge,
+        points: &PointSet,
+        group: &[usize],
+        noise: f64,
     ) -> bool {
         let positions: Vec<Point3<f64>> = group.iter().map(|&i| self.positions[i]).collect();
         let normals: Vec<nalgebra::Vector3<f64>> =
@@ -867,10 +923,13 @@ impl LeafParts<'_> {
             &Shape::of(positions.iter().copied()),
             &positions,
             &normals,
-            SheetScale { noise, min_facing },
+            SheetScale {
+                noise,
+                min_facing: judge.min_facing,
+            },
             self.foreground,
-            heights,
-            options,
+            judge.heights,
+            judge.options,
         ) == SegmentLabel::Leaf
     }
 
@@ -987,7 +1046,13 @@ impl LeafParts<'_> {
         };
         let flat_facing = flat.facing(SHEET_SHAPE_NEIGHBOURS);
         let facing_scale = TOUCHING_LEAVES_FACING_SCALE * (1.0 - flat_facing).max(1e-3);
-        let min_facing = MIN_FOUND_LEAF_FACING * flat_facing;
+        let typical = typical_leaf_points(self.segments);
+        let min_found_points = (MIN_FOUND_SHARE_OF_TYPICAL_LEAF * typical).ceil() as usize;
+        let Some(judge) =
+            self.found_leaf_judge(plane_rms, min_found_points, heights, &options.ncut)
+        else {
+            return 0;
+        };
         let min_side = options.ncut.min_segment_points;
         let normals_of = |members: &[usize]| -> Vec<nalgebra::Vector3<f64>> {
             local_shape::local_shapes(&points.subset(members), SHEET_SHAPE_NEIGHBOURS)
@@ -1005,11 +1070,7 @@ impl LeafParts<'_> {
             })
             .collect();
         let mut cuts = 0;
-        let typical = typical_leaf_points(self.segments);
         let min_points = MIN_TOUCHING_SHARE_OF_TYPICAL_LEAF * typical;
-        let min_found_points = MIN_FOUND_SHARE_OF_TYPICAL_LEAF * typical;
-        // Built at the first side of a segment called other that passes the leaf test.
-        let all_points = std::cell::OnceCell::new();
         while let Some(s) = queue.pop() {
             let members: Vec<usize> = self.segments[s]
                 .points
@@ -1042,26 +1103,11 @@ impl LeafParts<'_> {
             let noise = self.noise_of_segment[s];
             let was_other = self.segments[s].label == SegmentLabel::Other;
             let is_leaf = |part: &[usize]| {
-                if was_other && (part.len() as f64) < min_found_points {
-                    return false;
+                if was_other {
+                    self.is_found_leaf(&judge, points, part, noise)
+                } else {
+                    self.passes_found_leaf_test(&judge, points, part, noise)
                 }
-                if !self.passes_found_leaf_test(
-                    points,
-                    part,
-                    noise,
-                    min_facing,
-                    heights,
-                    &options.ncut,
-                ) {
-                    return false;
-                }
-                !was_other
-                    || all_points
-                        .get_or_init(|| Neighbours::new(self.positions.iter().copied()).ok())
-                        .as_ref()
-                        .is_some_and(|all| {
-                            self.bounded_share(part, all) <= MAX_FOUND_LEAF_BOUNDED_SHARE
-                        })
             };
             let (leaf_a, leaf_b) = (is_leaf(&a), is_leaf(&b));
             if !leaf_a && !leaf_b {
@@ -1123,11 +1169,8 @@ impl LeafParts<'_> {
         heights: PlantHeights,
         options: &SegmentOptions,
     ) -> Vec<usize> {
-        let Some(flat) = FlatSheet::like(self.spacing, plane_rms) else {
-            return Vec::new();
-        };
-        let min_facing = MIN_FOUND_LEAF_FACING * flat.facing(SHEET_SHAPE_NEIGHBOURS);
-        let Ok(all_points) = Neighbours::new(self.positions.iter().copied()) else {
+        let Some(judge) = self.found_leaf_judge(plane_rms, min_points, heights, &options.ncut)
+        else {
             return Vec::new();
         };
         let mut relabelled = Vec::new();
@@ -1141,20 +1184,7 @@ impl LeafParts<'_> {
                 .map(|&p| p as usize)
                 .collect();
             group.sort_unstable();
-            if group.len() < min_points.max(options.ncut.min_segment_points)
-                || self.bounded_share(&group, &all_points) > MAX_FOUND_LEAF_BOUNDED_SHARE
-            {
-                continue;
-            }
-            let noise = self.noise_of_segment[s];
-            if self.passes_found_leaf_test(
-                points,
-                &group,
-                noise,
-                min_facing,
-                heights,
-                &options.ncut,
-            ) {
+            if self.is_found_leaf(&judge, points, &group, self.noise_of_segment[s]) {
                 self.segments[s].label = SegmentLabel::Leaf;
                 relabelled.push(s);
             }
@@ -1232,35 +1262,24 @@ impl LeafParts<'_> {
             .collect();
         let groups =
             self.sheet_groups_with_rims(&sheet_points, &candidate, &noise_of, &options.borders);
-        let min_points = min_points.max(options.ncut.min_segment_points);
-        let min_facing = MIN_FOUND_LEAF_FACING * flat.facing(SHEET_SHAPE_NEIGHBOURS);
-        let Ok(all_points) = Neighbours::new(self.positions.iter().copied()) else {
+        let Some(judge) = self.found_leaf_judge(plane_rms, min_points, heights, &options.ncut)
+        else {
             return 0;
         };
         let mut found = 0;
         let groups = groups.into_iter().filter_map(|(first, second)| {
-            if first.len() >= min_points {
+            if first.len() >= judge.min_points {
                 Some(first)
-            } else if second.len() >= min_points {
+            } else if second.len() >= judge.min_points {
                 Some(second)
             } else {
                 None
             }
         });
         for group in groups {
-            if self.bounded_share(&group, &all_points) > MAX_FOUND_LEAF_BOUNDED_SHARE {
-                continue;
-            }
             let noise =
                 median(group.iter().filter_map(|i| noise_of.get(i).copied())).unwrap_or(0.0);
-            if !self.passes_found_leaf_test(
-                points,
-                &group,
-                noise,
-                min_facing,
-                heights,
-                &options.ncut,
-            ) {
+            if !self.is_found_leaf(&judge, points, &group, noise) {
                 continue;
             }
             let shape = Shape::of(group.iter().map(|&i| self.positions[i]));
