@@ -8,7 +8,8 @@
 //! before the leaf test; 0.683 and 0.960 once a group bounded all round is not a leaf; 0.693
 //! and 0.954 once leaf segments holding touching small leaves are cut apart; 0.706 and 0.948
 //! once found leaves are judged at the size a second rim pass gives them and segments called
-//! other are judged again with normals from within the segment.
+//! other are judged again with normals from within the segment; 0.742 and 0.947 once found
+//! leaves are judged from one sheet neighbourhood (8 points) and a sixth of the typical leaf.
 
 mod common;
 
@@ -58,7 +59,7 @@ fn most_small_leaves_are_segments_of_their_own() {
         scores.predicted_segments
     );
     assert!(scores.gt_leaves > 150, "{} leaves", scores.gt_leaves);
-    assert!(scores.recall >= 0.64, "recall {:.3}", scores.recall);
+    assert!(scores.recall >= 0.72, "recall {:.3}", scores.recall);
     assert!(
         scores.precision >= 0.93,
         "precision {:.3}",
