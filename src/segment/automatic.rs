@@ -902,8 +902,8 @@ impl LeafParts<'_> {
     }
 
     /// Whether `group` (sorted), whose points' median local plane RMS is `noise`, is judged a
-    /// leaf by `judge`: its size, the leaf test ([`LeafParts::passes_found_leaf_test`]), then
-    /// its free edge.
+    /// leaf by `judge`: its size, its free edge, then the leaf test
+    /// ([`LeafParts::passes_found_leaf_test`]; the dearest, last).
     fn is_found_leaf(
         &self,
         judge: &FoundLeafJudge,
@@ -912,12 +912,12 @@ impl LeafParts<'_> {
         noise: f64,
     ) -> bool {
         group.len() >= judge.min_points
-            && self.passes_found_leaf_test(judge, points, group, noise)
             && judge
                 .all_points
                 .get_or_init(|| Neighbours::new(self.positions.iter().copied()).ok())
                 .as_ref()
                 .is_some_and(|all| self.bounded_share(group, all) <= MAX_FOUND_LEAF_BOUNDED_SHARE)
+            && self.passes_found_leaf_test(judge, points, group, noise)
     }
 
     /// Whether `group` passes the leaf test of found leaves: [`classify`] with each point's
