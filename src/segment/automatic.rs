@@ -2107,19 +2107,7 @@ mod tests {
             }
         }
         let leaf = positions.len();
-        // Its twig: a line of points from the leaf's base, down and away at 45°.
-        positions.extend((1..=30).map(|k| {
-            let along = k as f64 * spacing * std::f64::consts::FRAC_1_SQRT_2;
-            Point3::new(-0.013 - along, 0.0, 0.3 - along)
-        }));
-        let twig_end = positions.len();
-        // A stem 12 mm in radius lower down, sampled all round.
-        positions.extend(
-            tube(Point3::new(0.1, 0.1, 0.15), 0.012, 0.06, spacing)
-                .into_iter()
-                .enumerate()
-                .map(|(k, p)| p + Vector3::new(0.0, 0.0, 0.3 * noise * jitter(k + 3))),
-        );
+        let twig_end = add_twig_and_stem(&mut positions, Point3::new(-0.013, 0.0, 0.3), 30);
         let options = SegmentOptions::default();
         let ((found, sizes), segments, point_segment) =
             with_stem_points(positions, spacing, |parts, points| {
@@ -2143,6 +2131,30 @@ mod tests {
         );
     }
 
+    /// Adds a leaf's twig (`twig_points` points 2 mm apart from `leaf_base`, down and away at
+    /// 45°) and a stem 12 mm in radius lower down, sampled all round with 0.06 mm of noise;
+    /// returns where the twig ends (the stem's first point).
+    fn add_twig_and_stem(
+        positions: &mut Vec<Point3<f64>>,
+        leaf_base: Point3<f64>,
+        twig_points: usize,
+    ) -> usize {
+        let spacing = 0.002;
+        let noise = 0.0002;
+        positions.extend((1..=twig_points).map(|k| {
+            let along = k as f64 * spacing * std::f64::consts::FRAC_1_SQRT_2;
+            leaf_base + Vector3::new(-along, 0.0, -along)
+        }));
+        let twig_end = positions.len();
+        positions.extend(
+            tube(Point3::new(0.1, 0.1, 0.15), 0.012, 0.06, spacing)
+                .into_iter()
+                .enumerate()
+                .map(|(k, p)| p + Vector3::new(0.0, 0.0, 0.3 * noise * jitter(k + 3))),
+        );
+        twig_end
+    }
+
     /// A leaf of fewer points than the normalized cut's smallest segment (20), taken whole by
     /// the stem test, is found down to one sheet neighbourhood; the stem beside it, whose
     /// patches of that size are as flat, is not (bounded all round).
@@ -2156,18 +2168,7 @@ mod tests {
             (MIN_FOUND_LEAF_POINTS..NcutOptions::default().min_segment_points).contains(&leaf),
             "{leaf} leaf points"
         );
-        // Its twig, down and away at 45°, and a stem 12 mm in radius lower down.
-        positions.extend((1..=20).map(|k| {
-            let along = k as f64 * spacing * std::f64::consts::FRAC_1_SQRT_2;
-            Point3::new(-along, 0.0, 0.3 - along)
-        }));
-        let twig_end = positions.len();
-        positions.extend(
-            tube(Point3::new(0.1, 0.1, 0.15), 0.012, 0.06, spacing)
-                .into_iter()
-                .enumerate()
-                .map(|(k, p)| p + Vector3::new(0.0, 0.0, 0.3 * noise * jitter(k + 3))),
-        );
+        let twig_end = add_twig_and_stem(&mut positions, Point3::new(0.0, 0.0, 0.3), 20);
         let options = SegmentOptions::default();
         let ((found, sizes), segments, point_segment) =
             with_stem_points(positions, spacing, |parts, points| {
