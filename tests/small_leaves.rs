@@ -9,7 +9,8 @@
 //! and 0.954 once leaf segments holding touching small leaves are cut apart; 0.706 and 0.948
 //! once found leaves are judged at the size a second rim pass gives them and segments called
 //! other are judged again with normals from within the segment; 0.742 and 0.947 once found
-//! leaves are judged from one sheet neighbourhood (8 points) and a sixth of the typical leaf.
+//! leaves are judged from one sheet neighbourhood (8 points) and a sixth of the typical leaf;
+//! 0.753 and 0.942 once small leaves joined to a thick stem's surface are peeled off it.
 
 mod common;
 

@@ -382,8 +382,8 @@ const PEEL_TURN_SCALE: f64 = 10.0;
 /// A part peeled from a group ([`PEEL_TURN_SCALE`]) is a leaf only where at most this share of
 /// its points has another point within two spacings: a leaf touches the stem it was joined to
 /// at its base, a piece of the stem's surface has the rest of the stem along its sides. Parts
-/// that passed the found-leaf test, semi-dense smallleaf seeds 1–3: leaves at 0.09–0.46 (29 of
-/// 34), stem pieces at 0.57–0.95 (76, two under 0.7). Seeds 1–3 with 0.4 / 0.5 / 0.6: recall
+/// that passed the found-leaf test, semi-dense smallleaf seeds 1–3: leaves at 0.09–0.46 (28 of
+/// 34), stem pieces at 0.57–0.95 (76, three under 0.7). Seeds 1–3 with 0.4 / 0.5 / 0.6: recall
 /// 0.812 / 0.814 / 0.814, 0.721 / 0.721 / 0.721, 0.689 / 0.691 / 0.691; precision 0.912 /
 /// 0.912 / 0.912, 0.915 / 0.913 / 0.913, 0.916 / 0.916 / 0.913; without it (0.95) precision
 /// fell to 0.834 / 0.839 / 0.846.
