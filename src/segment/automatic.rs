@@ -943,7 +943,7 @@ impl LeafParts<'_> {
                 .get_or_init(|| Neighbours::new(self.positions.iter().copied()).ok())
                 .as_ref()
                 .is_some_and(|all| self.bounded_share(group, all) <= max_bounded_share)
-            && self.passes_found_leaf_test(judge, points, group, noise)
+            && self.passes_found_leaf_test(judge, points, group, noise, judge.min_points)
     }
 
     /// The parts of `group` (sorted) whose points are joined where they lie within two
@@ -977,14 +977,15 @@ impl LeafParts<'_> {
 
     /// Whether `group` passes the leaf test of found leaves: [`classify`] with each point's
     /// normal from its [`SHEET_SHAPE_NEIGHBOURS`] nearest within the group (normals over all
-    /// plant points mix in a small leaf's twig and neighbours), against `judge`'s facing and
-    /// the group's `noise`.
+    /// plant points mix in a small leaf's twig and neighbours), against `judge`'s facing, the
+    /// group's `noise` and a leaf's fewest points `min_points`.
     fn passes_found_leaf_test(
         &self,
         judge: &FoundLeafJudge,
         points: &PointSet,
         group: &[usize],
         noise: f64,
+        min_points: usize,
     ) -> bool {
         let positions: Vec<Point3<f64>> = group.iter().map(|&i| self.positions[i]).collect();
         let normals: Vec<nalgebra::Vector3<f64>> =
@@ -999,7 +1000,7 @@ impl LeafParts<'_> {
             SheetScale {
                 noise,
                 min_facing: judge.min_facing,
-                min_points: judge.min_points,
+                min_points,
             },
             self.foreground,
             judge.heights,
@@ -1180,7 +1181,7 @@ impl LeafParts<'_> {
                 if was_other {
                     self.is_found_leaf(&judge, points, part, noise, MAX_FOUND_LEAF_BOUNDED_SHARE)
                 } else {
-                    self.passes_found_leaf_test(&judge, points, part, noise)
+                    self.passes_found_leaf_test(&judge, points, part, noise, min_side)
                 }
             };
             let (leaf_a, leaf_b) = (is_leaf(&a), is_leaf(&b));
