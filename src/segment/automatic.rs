@@ -812,8 +812,8 @@ struct LeafParts<'a> {
 /// neighbours within the group, facing at least [`MIN_FOUND_LEAF_FACING`] × a flat sheet's.
 struct FoundLeafJudge<'o> {
     min_points: usize,
-    /// [`MIN_FOUND_LEAF_FACING`] × the facing of a flat sheet with the plant's spacing and noise.
-    min_facing: f64,
+    /// The facing of a flat sheet with the plant's spacing and noise ([`FlatSheet::facing`]).
+    flat_facing: f64,
     heights: PlantHeights,
     options: &'o NcutOptions,
     /// All the points, indexed for the bounded share; built at the first group that needs it
@@ -917,7 +917,7 @@ impl LeafParts<'_> {
         let flat = FlatSheet::like(self.spacing, plane_rms)?;
         Some(FoundLeafJudge {
             min_points: min_points.max(MIN_FOUND_LEAF_POINTS),
-            min_facing: MIN_FOUND_LEAF_FACING * flat.facing(SHEET_SHAPE_NEIGHBOURS),
+            flat_facing: flat.facing(SHEET_SHAPE_NEIGHBOURS),
             heights,
             options,
             all_points: std::cell::OnceCell::new(),
@@ -999,7 +999,7 @@ impl LeafParts<'_> {
             &normals,
             SheetScale {
                 noise,
-                min_facing: judge.min_facing,
+                min_facing: MIN_FOUND_LEAF_FACING * judge.flat_facing,
                 min_points,
             },
             self.foreground,
@@ -1116,11 +1116,6 @@ impl LeafParts<'_> {
         heights: PlantHeights,
         options: &SegmentOptions,
     ) -> usize {
-        let Some(flat) = FlatSheet::like(self.spacing, plane_rms) else {
-            return 0;
-        };
-        let flat_facing = flat.facing(SHEET_SHAPE_NEIGHBOURS);
-        let facing_scale = TOUCHING_LEAVES_FACING_SCALE * (1.0 - flat_facing).max(1e-3);
         let typical = typical_leaf_points(self.segments);
         let min_found_points = (MIN_FOUND_SHARE_OF_TYPICAL_LEAF * typical).ceil() as usize;
         let Some(judge) =
@@ -1128,6 +1123,7 @@ impl LeafParts<'_> {
         else {
             return 0;
         };
+        let facing_scale = TOUCHING_LEAVES_FACING_SCALE * (1.0 - judge.flat_facing).max(1e-3);
         let min_side = options.ncut.min_segment_points;
         let normals_of = |members: &[usize]| -> Vec<nalgebra::Vector3<f64>> {
             local_shape::local_shapes(&points.subset(members), SHEET_SHAPE_NEIGHBOURS)
@@ -1358,33 +1354,24 @@ impl LeafParts<'_> {
                 None
             }
         });
-        let max_turn = PEEL_TURN_SCALE * (1.0 - flat.facing(SHEET_SHAPE_NEIGHBOURS)).max(1e-3);
+        let max_turn = PEEL_TURN_SCALE * (1.0 - judge.flat_facing).max(1e-3);
         let noise_of_group =
             |group: &[usize]| median(group.iter().filter_map(|i| noise_of.get(i).copied()));
-        let mut leaves: Vec<Vec<usize>> = Vec::new();
+        let mut leaves: Vec<(Vec<usize>, f64)> = Vec::new();
         for group in groups {
             let noise = noise_of_group(&group).unwrap_or(0.0);
             if self.is_found_leaf(&judge, points, &group, noise, MAX_FOUND_LEAF_BOUNDED_SHARE) {
-                leaves.push(group);
+                leaves.push((group, noise));
             } else if group.len() >= 2 * judge.min_points {
-                leaves.extend(
-                    self.peel(points, &group, max_turn)
-                        .into_iter()
-                        .filter(|part| {
-                            let noise = noise_of_group(part).unwrap_or(0.0);
-                            self.is_found_leaf(
-                                &judge,
-                                points,
-                                part,
-                                noise,
-                                MAX_PEELED_BOUNDED_SHARE,
-                            )
-                        }),
-                );
+                for part in self.peel(points, &group, max_turn) {
+                    let noise = noise_of_group(&part).unwrap_or(0.0);
+                    if self.is_found_leaf(&judge, points, &part, noise, MAX_PEELED_BOUNDED_SHARE) {
+                        leaves.push((part, noise));
+                    }
+                }
             }
         }
-        for group in leaves {
-            let noise = noise_of_group(&group).unwrap_or(0.0);
+        for (group, noise) in leaves {
             let shape = Shape::of(group.iter().map(|&i| self.positions[i]));
             let s = self.segments.len();
             self.segments.push(Segment {
