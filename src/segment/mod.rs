@@ -9,12 +9,15 @@
 //! - [`labels`]: the current labels (segment per point, state per segment) as plain data; the
 //!   editing session changes them, later stages read them.
 //! - [`views`]: per-view projections and superpixels, cached; a segment's boundary in a view.
+//! - [`colour`]: the plant's leaf and stem colours, measured on it; a segment's colour as
+//!   evidence of what it is.
 //! - [`pieces`]: small leaf segments a gap apart joined as pieces of one leaf.
 //! - [`boundary`]: image boundaries (§5.4): watershed superpixels and a two-label graph cut.
 
 pub mod automatic;
 pub mod borders;
 pub mod boundary;
+pub mod colour;
 pub mod foreground;
 pub mod labels;
 pub mod photometric;
