@@ -961,6 +961,26 @@ impl LeafParts<'_> {
             .is_some_and(|all| self.bounded_share(group, all) <= max_bounded_share)
     }
 
+    /// Whether `group` (sorted), which failed the found-leaf test, is a leaf by its colour
+    /// ([`OrganColours::is_leaf_coloured`]) where its shape does not say otherwise: at least
+    /// `judge`'s fewest points and fewer than `max_points`, not a stem's width
+    /// ([`MIN_LEAF_WIDTH_RATIO`]) and a free edge ([`MAX_FOUND_LEAF_BOUNDED_SHARE`]).
+    fn is_leaf_coloured_piece(
+        &self,
+        judge: &FoundLeafJudge,
+        points: &PointSet,
+        group: &[usize],
+        colours: &OrganColours,
+        max_points: f64,
+    ) -> bool {
+        group.len() >= judge.min_points
+            && (group.len() as f64) < max_points
+            && Shape::of(group.iter().map(|&i| self.positions[i])).width_ratio()
+                >= MIN_LEAF_WIDTH_RATIO
+            && colours.is_leaf_coloured(&points.colors, group)
+            && self.has_free_edge(judge, group, MAX_FOUND_LEAF_BOUNDED_SHARE)
+    }
+
     /// The plant's leaf and stem colours ([`OrganColours`]): the leaf colour from the points of
     /// the segments labelled leaf, the stem colour from the stem test's points in none.
     fn organ_colours(&self, points: &PointSet) -> Option<OrganColours> {
@@ -1301,12 +1321,15 @@ impl LeafParts<'_> {
             let noise = self.noise_of_segment[s];
             let leaf =
                 self.is_found_leaf(&judge, points, &group, noise, MAX_FOUND_LEAF_BOUNDED_SHARE)
-                    || (group.len() >= judge.min_points
-                        && (group.len() as f64) < max_coloured_points
-                        && Shape::of(group.iter().map(|&i| self.positions[i])).width_ratio()
-                            >= MIN_LEAF_WIDTH_RATIO
-                        && colours.is_some_and(|c| c.is_leaf_coloured(&points.colors, &group))
-                        && self.has_free_edge(&judge, &group, MAX_FOUND_LEAF_BOUNDED_SHARE));
+                    || colours.as_ref().is_some_and(|colours| {
+                        self.is_leaf_coloured_piece(
+                            &judge,
+                            points,
+                            &group,
+                            colours,
+                            max_coloured_points,
+                        )
+                    });
             if leaf {
                 self.segments[s].label = SegmentLabel::Leaf;
                 relabelled.push(s);
