@@ -1287,11 +1287,11 @@ impl LeafParts<'_> {
     /// points (a larger segment called other holds several leaves, which the touching-leaves
     /// cut separates: relabelling it first merged three leaves of semi-dense medium seed 1),
     /// not a stem's width ([`MIN_LEAF_WIDTH_RATIO`]) and a free edge. Small leaves curled or
-    /// mixed with a few twig points fail the facing test (0.3–0.87 against 0.92 on semi-dense
-    /// smallleaf seed 3) where their colour is the leaves' (0.5–1.2 on the line from the stem
-    /// colour at 0 to the leaf colour at 1); the segments of stem points called other lie at
-    /// 0.21 or below on smallleaf, medium, broadleaf and compound plants. Returns the
-    /// relabelled segments.
+    /// mixed with a few twig points fail the facing test (0.31–0.91 against 0.92 on semi-dense
+    /// smallleaf seed 3) where their colour is the leaves' (0.5–1.2 but for one on the line
+    /// from the stem colour at 0 to the leaf colour at 1); the segments called other of stem
+    /// points alone lie at 0.21 or below on smallleaf, medium, broadleaf and compound plants.
+    /// Returns the relabelled segments.
     fn rejudge_other_segments(
         &mut self,
         points: &PointSet,
@@ -2015,6 +2015,30 @@ mod tests {
         (result, segments, point_segment)
     }
 
+    /// Adds a segment of `label` holding `group`, with its points' `noise`.
+    fn add_segment(
+        parts: &mut LeafParts<'_>,
+        points: &PointSet,
+        label: SegmentLabel,
+        group: &[usize],
+        noise: f64,
+    ) {
+        let s = parts.segments.len();
+        parts.segments.push(Segment {
+            id: s as u32,
+            label,
+            leaf_id: None,
+            points: Vec::new(),
+            num_points: 0,
+            shape: Shape::of(group.iter().map(|&i| points.positions[i])),
+        });
+        parts.noise_of_segment.push(noise);
+        for &i in group {
+            parts.assign(i, s);
+        }
+        parts.refresh(s);
+    }
+
     /// A strip cut from a thick stem's surface is bounded all round by the rest of the stem; a
     /// small leaf only where its twig joins it.
     #[test]
@@ -2170,20 +2194,7 @@ mod tests {
         let options = SegmentOptions::default();
         let (relabelled, segments, _) = with_stem_points(positions, spacing, |parts, points| {
             for group in [&leaf, &fold, &strip] {
-                let s = parts.segments.len();
-                parts.segments.push(Segment {
-                    id: s as u32,
-                    label: SegmentLabel::Other,
-                    leaf_id: None,
-                    points: Vec::new(),
-                    num_points: 0,
-                    shape: Shape::of(group.iter().map(|&i| points.positions[i])),
-                });
-                parts.noise_of_segment.push(noise);
-                for &i in group {
-                    parts.assign(i, s);
-                }
-                parts.refresh(s);
+                add_segment(parts, points, SegmentLabel::Other, group, noise);
             }
             parts.rejudge_other_segments(points, 0.5 * noise, 20, HALF_METRE_PLANT, &options)
         });
@@ -2276,20 +2287,7 @@ mod tests {
                     (SegmentLabel::Other, &large),
                 ]);
                 for (label, group) in groups {
-                    let s = parts.segments.len();
-                    parts.segments.push(Segment {
-                        id: s as u32,
-                        label,
-                        leaf_id: None,
-                        points: Vec::new(),
-                        num_points: 0,
-                        shape: Shape::of(group.iter().map(|&i| points.positions[i])),
-                    });
-                    parts.noise_of_segment.push(noise);
-                    for &i in group {
-                        parts.assign(i, s);
-                    }
-                    parts.refresh(s);
+                    add_segment(parts, points, label, group, noise);
                 }
                 assert!(
                     parts.organ_colours(points).is_some(),
@@ -2571,20 +2569,9 @@ mod tests {
         let noise = 0.0002;
         let options = SegmentOptions::default();
         let (cuts, segments, _) = with_stem_points(positions, 0.002, |parts, points| {
-            for (s, &(start, end, label)) in members.iter().enumerate() {
-                parts.segments.push(Segment {
-                    id: s as u32,
-                    label,
-                    leaf_id: None,
-                    points: Vec::new(),
-                    num_points: 0,
-                    shape: Shape::of(std::iter::once(Point3::origin())),
-                });
-                parts.noise_of_segment.push(0.5 * noise);
-                for i in start..end {
-                    parts.assign(i, s);
-                }
-                parts.refresh(s);
+            for &(start, end, label) in members {
+                let group: Vec<usize> = (start..end).collect();
+                add_segment(parts, points, label, &group, 0.5 * noise);
             }
             parts.split_touching_leaves(points, 0.5 * noise, HALF_METRE_PLANT, &options)
         });
