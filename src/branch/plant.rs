@@ -14,7 +14,10 @@ use super::skeleton::{
 use super::{BranchTree, CylinderMeshing};
 use crate::graph::neighbours::Neighbours;
 use crate::graph::points::PointSet;
+use crate::graph::shape::Shape;
 use crate::model::ModelBranch;
+use crate::segment::automatic::MIN_LEAF_WIDTH_RATIO;
+use crate::segment::colour::OrganColours;
 use crate::segment::foreground::{Foreground, PointClass};
 pub use crate::segment::pot::{MIN_POT_POINTS, PotShape, pot_from_points};
 use crate::segment::{Labels, SegmentLabel, Segmentation};
@@ -49,15 +52,76 @@ pub fn skeleton_point_indices(
         .collect()
 }
 
-/// Whether a point is on a leaf's sheet: in a segment labelled leaf, but not a leaf's rim that
-/// the stem test found on a tube.
-fn on_leaf_sheet(foreground: &Foreground, labels: &Labels, i: usize) -> bool {
-    labels.label_of_point(i) == Some(SegmentLabel::Leaf) && foreground.class[i] != PointClass::Stem
+/// Fewest points of a segment judged a piece of a leaf's sheet ([`leaf_sheet_pieces`]): the
+/// segmentation's smallest segment (`NcutOptions::min_segment_points`' default).
+const MIN_PIECE_POINTS: usize = 20;
+
+/// A piece of a leaf's sheet is at least as leaf-coloured as the plant's leaves on average
+/// ([`OrganColours::leaf_likeness`] 1), stricter than the leaf test's midway
+/// ([`crate::segment::colour::MIN_LEAF_LIKENESS`]): the stem colour is measured mostly on the
+/// main stem, and thinner branches lie between it and the leaves (0.50–0.66 on medium seed 4
+/// from photos, against 1.46–1.70 for its leaf pieces).
+const MIN_PIECE_LEAF_LIKENESS: f64 = 1.0;
+
+/// Per segment id: whether a segment the labels call other or stem is a piece of a leaf's
+/// sheet. From photos a leaf that stereo samples in patches falls apart into pieces too small
+/// for the leaf test; they stay other, and the skeleton drew branches over them (broadleaf
+/// seed 1: 0.29 m of branches, all off the plant, over one such leaf). Such a piece is
+/// leaf-coloured ([`OrganColours`], measured on the same labels: where the plant's leaves and
+/// stems are not told apart by colour, no segment is a piece) and wider than a stem (the leaf
+/// test's `MIN_LEAF_WIDTH_RATIO`). On the tuning plant the other and stem segments of 50
+/// points or more split cleanly by colour: the ten leaf-coloured ones (leaf likeness 0.99–2.00)
+/// are all leaf, and the 12 on stems lie at −0.35 to 0.12.
+pub fn leaf_sheet_pieces(points: &PointSet, class: &[PointClass], labels: &Labels) -> Vec<bool> {
+    let count = labels
+        .segment_of
+        .len()
+        .min(points.positions.len())
+        .min(class.len());
+    let mut pieces = vec![false; labels.segments.len()];
+    let Some(colours) = OrganColours::measure_split(
+        &points.colors,
+        count,
+        |i| labels.label_of_point(i) == Some(SegmentLabel::Leaf),
+        |i| class[i] == PointClass::Stem,
+    ) else {
+        return pieces;
+    };
+    let mut members: Vec<Vec<usize>> = vec![Vec::new(); labels.segments.len()];
+    for i in 0..count {
+        if matches!(
+            labels.label_of_point(i),
+            Some(SegmentLabel::Other | SegmentLabel::Stem)
+        ) && let Some(list) = members.get_mut(labels.segment_of[i] as usize)
+        {
+            list.push(i);
+        }
+    }
+    for (piece, members) in pieces.iter_mut().zip(&members) {
+        *piece = members.len() >= MIN_PIECE_POINTS
+            && Shape::of(members.iter().map(|&i| points.positions[i])).width_ratio()
+                >= MIN_LEAF_WIDTH_RATIO
+            && colours
+                .leaf_likeness(&points.colors, members)
+                .is_some_and(|likeness| likeness >= MIN_PIECE_LEAF_LIKENESS);
+    }
+    pieces
+}
+
+/// Whether a point is on a leaf's sheet: in a segment labelled leaf or a piece of a leaf's
+/// sheet (`pieces`, from [`leaf_sheet_pieces`]), but not a leaf's rim that the stem test found
+/// on a tube.
+fn on_leaf_sheet(foreground: &Foreground, labels: &Labels, pieces: &[bool], i: usize) -> bool {
+    let segment = labels.segment_of.get(i).copied().unwrap_or(-1);
+    let sheet = labels.label_of_point(i) == Some(SegmentLabel::Leaf)
+        || (segment >= 0 && pieces.get(segment as usize).copied().unwrap_or(false));
+    sheet && foreground.class[i] != PointClass::Stem
 }
 
 /// Whether a point counts as sheet in the [`TubeTest`]: on a leaf's sheet or the pot.
-fn counts_as_sheet(foreground: &Foreground, labels: &Labels, i: usize) -> bool {
-    on_leaf_sheet(foreground, labels, i) || labels.label_of_point(i) == Some(SegmentLabel::Pot)
+fn counts_as_sheet(foreground: &Foreground, labels: &Labels, pieces: &[bool], i: usize) -> bool {
+    on_leaf_sheet(foreground, labels, pieces, i)
+        || labels.label_of_point(i) == Some(SegmentLabel::Pot)
 }
 
 /// Which candidate points are not the edge of a leaf or the pot: from photos the candidates
@@ -117,6 +181,7 @@ pub fn tube_point_indices(
         return candidates.to_vec();
     };
     let radius = test.radius_spacings * spacing;
+    let pieces = leaf_sheet_pieces(&segmentation.points, &segmentation.foreground.class, labels);
     candidates
         .par_iter()
         .copied()
@@ -124,7 +189,9 @@ pub fn tube_point_indices(
             let around = neighbours.within_radius_unsorted(&positions[i as usize], radius);
             let sheet = around
                 .iter()
-                .filter(|found| counts_as_sheet(&segmentation.foreground, labels, found.index))
+                .filter(|found| {
+                    counts_as_sheet(&segmentation.foreground, labels, &pieces, found.index)
+                })
                 .count();
             sheet as f64 <= test.max_sheet_share * around.len() as f64
         })
@@ -296,8 +363,9 @@ pub fn automatic_plant_skeleton(
         automatic_skeleton_from(&input.points, &up, &input.base, &options.skeleton)?;
     stem_rises(&tree, &up)?;
     let positions = &segmentation.points.positions;
+    let pieces = leaf_sheet_pieces(&segmentation.points, &segmentation.foreground.class, labels);
     let sheets: Vec<(Point3<f64>, u32)> = (0..positions.len().min(labels.segment_of.len()))
-        .filter(|&i| on_leaf_sheet(&segmentation.foreground, labels, i))
+        .filter(|&i| on_leaf_sheet(&segmentation.foreground, labels, &pieces, i))
         .map(|i| (positions[i], labels.segment_of[i].max(0) as u32))
         .collect();
     stats.rims_pruned = remove_leaf_rims(
@@ -708,6 +776,113 @@ mod tests {
         assert_eq!(
             skeleton_point_indices(&points, &foreground, &labels),
             vec![1, 3, 4]
+        );
+    }
+
+    /// A square patch of `side` × `side` points 2 mm apart at height `z`, starting at `x0`
+    /// (a strip when `rows` < `side`).
+    fn patch(x0: f64, z: f64, side: usize, rows: usize) -> Vec<Point3<f64>> {
+        (0..side * rows)
+            .map(|k| Point3::new(x0 + 0.002 * (k % side) as f64, 0.002 * (k / side) as f64, z))
+            .collect()
+    }
+
+    #[test]
+    fn leaf_coloured_pieces_of_sheet_count_as_leaf_and_stems_of_any_green_do_not() {
+        use crate::segment::labels::SegmentState;
+        use crate::util::rng::Rng;
+        let mut rng = Rng::seed_from(7);
+        let mut shade = |rgb: [f64; 3]| {
+            let s = rng.range(0.5, 1.0);
+            rgb.map(|c| (s * c).round() as u8)
+        };
+        const GREEN: [f64; 3] = [60.0, 130.0, 50.0];
+        const BARK: [f64; 3] = [120.0, 95.0, 60.0];
+        // Between the two: a thin branch's green-brown.
+        const OLIVE: [f64; 3] = [90.0, 112.0, 55.0];
+        // A leaf's pieces come out greener than whole leaves, whose segments take in their
+        // rims (likeness 0.99–2.0 on the plants measured).
+        const FRESH: [f64; 3] = [50.0, 140.0, 45.0];
+        // Segment 0: a leaf; 1: a (fresh) green piece of sheet; 2: a bark-coloured patch; 3: an
+        // olive patch; 4: a green strip too narrow for a leaf; 5: a green patch of 12 points.
+        // Then stem-test points in no segment, bark-coloured.
+        let parts: [(i32, [f64; 3], Vec<Point3<f64>>); 7] = [
+            (0, GREEN, patch(0.0, 0.2, 20, 20)),
+            (1, FRESH, patch(0.1, 0.2, 10, 10)),
+            (2, BARK, patch(0.2, 0.2, 10, 10)),
+            (3, OLIVE, patch(0.3, 0.2, 10, 10)),
+            (4, FRESH, patch(0.4, 0.2, 40, 1)),
+            (5, FRESH, patch(0.5, 0.2, 4, 3)),
+            (-1, BARK, patch(0.0, 0.0, 30, 3)),
+        ];
+        let mut points = PointSet::default();
+        let mut segment_of = Vec::new();
+        let mut class = Vec::new();
+        for (segment, rgb, positions) in &parts {
+            for p in positions {
+                points.positions.push(*p);
+                points.colors.push(shade(*rgb));
+                segment_of.push(*segment);
+                class.push(if *segment < 0 {
+                    PointClass::Stem
+                } else {
+                    PointClass::Plant
+                });
+            }
+        }
+        let state = |label| {
+            Some(SegmentState {
+                label,
+                confirmed: false,
+            })
+        };
+        let mut labels = Labels {
+            segment_of,
+            segments: vec![
+                state(SegmentLabel::Leaf),
+                state(SegmentLabel::Other),
+                state(SegmentLabel::Other),
+                state(SegmentLabel::Stem),
+                state(SegmentLabel::Other),
+                state(SegmentLabel::Other),
+            ],
+        };
+        let pieces = leaf_sheet_pieces(&points, &class, &labels);
+        assert_eq!(pieces, vec![false, true, false, false, false, false]);
+        // The piece's points are sheet to the tube test and to the rim test; the bark patch's
+        // are not.
+        let foreground = Foreground {
+            class: class.clone(),
+            up: Vector3::z(),
+            floor: None,
+            walls: Vec::new(),
+            plant_center: Point3::origin(),
+            radius_limit: 1.0,
+        };
+        let first = |segment: i32| {
+            labels
+                .segment_of
+                .iter()
+                .position(|&s| s == segment)
+                .unwrap()
+        };
+        assert!(counts_as_sheet(&foreground, &labels, &pieces, first(1)));
+        assert!(!counts_as_sheet(&foreground, &labels, &pieces, first(2)));
+        assert!(on_leaf_sheet(&foreground, &labels, &pieces, first(0)));
+        assert!(!on_leaf_sheet(&foreground, &labels, &[], first(1)));
+        // A piece the labels call leaf is a leaf already.
+        labels.segments[1] = state(SegmentLabel::Leaf);
+        assert!(!leaf_sheet_pieces(&points, &class, &labels)[1]);
+        labels.segments[1] = state(SegmentLabel::Other);
+        // Where the stems are as green as the leaves, colour tells nothing: no pieces.
+        let start = points.len() - 90;
+        for c in &mut points.colors[start..] {
+            *c = shade(GREEN);
+        }
+        assert!(
+            leaf_sheet_pieces(&points, &class, &labels)
+                .iter()
+                .all(|&p| !p)
         );
     }
 

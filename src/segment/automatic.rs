@@ -355,7 +355,7 @@ fn merge_sheets(
 const MIN_LEAF_FACING: f64 = 0.88;
 
 /// A segment narrower than this (its [`Shape::width_ratio`], width over length) is a stem.
-const MIN_LEAF_WIDTH_RATIO: f64 = 0.15;
+pub(crate) const MIN_LEAF_WIDTH_RATIO: f64 = 0.15;
 
 /// The facing ([`MIN_LEAF_FACING`]) a leaf found among the stem test's points must keep, as a
 /// share of a flat sheet's: that of a leaf bent by 75° (0.93), above the 0.83–0.89 of the arcs
@@ -988,10 +988,9 @@ impl LeafParts<'_> {
             self.point_segment[i]
                 .is_some_and(|s| self.segments[s as usize].label == SegmentLabel::Leaf)
         };
-        let (leaf, stem): (Vec<usize>, Vec<usize>) = (0..self.positions.len())
-            .filter(|&i| is_leaf(i) || self.foreground.class[i] == PointClass::Stem)
-            .partition(|&i| is_leaf(i));
-        OrganColours::measure(&points.colors, &leaf, &stem)
+        OrganColours::measure_split(&points.colors, self.positions.len(), is_leaf, |i| {
+            self.foreground.class[i] == PointClass::Stem
+        })
     }
 
     /// The parts of `group` (sorted) whose points are joined where they lie within two

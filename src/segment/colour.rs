@@ -94,6 +94,21 @@ impl OrganColours {
         (separation >= MIN_COLOUR_SEPARATION * pooled).then_some(Self { stem, stem_to_leaf })
     }
 
+    /// Measures the models on the first `count` points (indices into `colors`): the leaf
+    /// colour from those `is_leaf` says are in leaf segments, the stem colour from those
+    /// `is_stem` says the stem test found, in no leaf segment ([`Self::measure`]).
+    pub fn measure_split(
+        colors: &[[u8; 3]],
+        count: usize,
+        is_leaf: impl Fn(usize) -> bool,
+        is_stem: impl Fn(usize) -> bool,
+    ) -> Option<Self> {
+        let (leaf, stem): (Vec<usize>, Vec<usize>) = (0..count.min(colors.len()))
+            .filter(|&i| is_leaf(i) || is_stem(i))
+            .partition(|&i| is_leaf(i));
+        Self::measure(colors, &leaf, &stem)
+    }
+
     /// Where `points`' mean chromaticity lies on the line from the stem colour (0) to the leaf
     /// colour (1); `None` when none of them has a colour.
     pub fn leaf_likeness(&self, colors: &[[u8; 3]], points: &[usize]) -> Option<f64> {
