@@ -66,12 +66,12 @@ const MIN_PIECE_LEAF_LIKENESS: f64 = 1.0;
 /// Per segment id: whether a segment the labels call other or stem is a piece of a leaf's
 /// sheet. From photos a leaf that stereo samples in patches falls apart into pieces too small
 /// for the leaf test; they stay other, and the skeleton drew branches over them (broadleaf
-/// seed 1: 0.29 m of branches, all off the plant, over one such leaf). Such a piece is
+/// seed 1: two branches, 0.30 m, over one such leaf). Such a piece is
 /// leaf-coloured ([`OrganColours`], measured on the same labels: where the plant's leaves and
 /// stems are not told apart by colour, no segment is a piece) and wider than a stem (the leaf
 /// test's `MIN_LEAF_WIDTH_RATIO`). On the tuning plant the other and stem segments of 50
 /// points or more split cleanly by colour: the ten leaf-coloured ones (leaf likeness 0.99–2.00)
-/// are all leaf, and the 12 on stems lie at −0.35 to 0.12.
+/// are all leaf, and the ten on stems lie at −0.35 to 0.12.
 pub fn leaf_sheet_pieces(points: &PointSet, class: &[PointClass], labels: &Labels) -> Vec<bool> {
     let count = labels
         .segment_of
