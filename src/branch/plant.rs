@@ -139,7 +139,8 @@ fn counts_as_sheet(foreground: &Foreground, labels: &Labels, pieces: &[bool], i:
 pub struct TubeTest {
     /// Ball radius in median point spacings.
     pub radius_spacings: f64,
-    /// Largest share of the ball's points in segments labelled leaf or pot.
+    /// Largest share of the ball's points on leaf sheets (segments labelled leaf, and pieces of
+    /// a leaf's sheet: [`leaf_sheet_pieces`]) or in segments labelled pot.
     pub max_sheet_share: f64,
 }
 
