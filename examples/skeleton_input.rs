@@ -14,7 +14,9 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use frond::branch::plant::{PlantSkeletonOptions, skeleton_point_indices, tube_point_indices};
+use frond::branch::plant::{
+    PlantSkeletonOptions, leaf_sheet_pieces, skeleton_point_indices, tube_point_indices,
+};
 use frond::eval::dense::thin_organ_accuracy;
 use frond::eval::{GroundTruth, align_to_ground_truth};
 use frond::graph::neighbours::Neighbours;
@@ -138,7 +140,12 @@ fn main() -> Result<()> {
     let input = if args.iter().any(|a| a == "--all-candidates") {
         candidates
     } else {
-        tube_point_indices(&segmentation, &labels, &candidates, &options.tube)
+        let pieces = leaf_sheet_pieces(
+            &segmentation.points,
+            &segmentation.foreground.class,
+            &labels,
+        );
+        tube_point_indices(&segmentation, &labels, &pieces, &candidates, &options.tube)
     };
     let mut in_input = vec![false; positions.len()];
     for &i in &input {

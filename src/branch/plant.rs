@@ -166,11 +166,13 @@ fn median_spacing(neighbours: &Neighbours) -> Option<f64> {
     }))
 }
 
-/// The candidates that pass the [`TubeTest`], in their order. All candidates pass when the
-/// spacing cannot be measured (fewer than two points).
+/// The candidates that pass the [`TubeTest`], in their order, with `pieces` the labels'
+/// [`leaf_sheet_pieces`]. All candidates pass when the spacing cannot be measured (fewer than
+/// two points).
 pub fn tube_point_indices(
     segmentation: &Segmentation,
     labels: &Labels,
+    pieces: &[bool],
     candidates: &[u32],
     test: &TubeTest,
 ) -> Vec<u32> {
@@ -182,7 +184,6 @@ pub fn tube_point_indices(
         return candidates.to_vec();
     };
     let radius = test.radius_spacings * spacing;
-    let pieces = leaf_sheet_pieces(&segmentation.points, &segmentation.foreground.class, labels);
     candidates
         .par_iter()
         .copied()
@@ -191,7 +192,7 @@ pub fn tube_point_indices(
             let sheet = around
                 .iter()
                 .filter(|found| {
-                    counts_as_sheet(&segmentation.foreground, labels, &pieces, found.index)
+                    counts_as_sheet(&segmentation.foreground, labels, pieces, found.index)
                 })
                 .count();
             sheet as f64 <= test.max_sheet_share * around.len() as f64
@@ -207,16 +208,22 @@ pub fn skeleton_points(
     test: &TubeTest,
 ) -> Vec<Point3<f64>> {
     let positions = &segmentation.points.positions;
-    tube_points(segmentation, labels, test)
+    let pieces = leaf_sheet_pieces(&segmentation.points, &segmentation.foreground.class, labels);
+    tube_points(segmentation, labels, &pieces, test)
         .into_iter()
         .map(|i| positions[i as usize])
         .collect()
 }
 
 /// Indices of the [`skeleton_points`].
-fn tube_points(segmentation: &Segmentation, labels: &Labels, test: &TubeTest) -> Vec<u32> {
+fn tube_points(
+    segmentation: &Segmentation,
+    labels: &Labels,
+    pieces: &[bool],
+    test: &TubeTest,
+) -> Vec<u32> {
     let candidates = skeleton_point_indices(&segmentation.points, &segmentation.foreground, labels);
-    tube_point_indices(segmentation, labels, &candidates, test)
+    tube_point_indices(segmentation, labels, pieces, &candidates, test)
 }
 
 /// Options of a plant's automatic skeleton: which points may carry a branch and how the
@@ -309,6 +316,8 @@ pub struct SkeletonInput {
     /// see [`PointSet::thin_organ`]).
     pub thin_organ: Vec<bool>,
     pub base: PlantBase,
+    /// Per segment id: the labels' [`leaf_sheet_pieces`], which the tube test counted as sheet.
+    pub pieces: Vec<bool>,
 }
 
 /// The points a plant's skeleton is built from and where it is rooted: the points that pass
@@ -321,7 +330,8 @@ pub fn skeleton_input(
 ) -> SkeletonInput {
     let up = segmentation.foreground.up;
     let set = &segmentation.points;
-    let mut indices = tube_points(segmentation, labels, tube);
+    let pieces = leaf_sheet_pieces(set, &segmentation.foreground.class, labels);
+    let mut indices = tube_points(segmentation, labels, &pieces, tube);
     let points: Vec<Point3<f64>> = indices.iter().map(|&i| set.positions[i as usize]).collect();
     let pot = pot_shape(segmentation, labels);
     let base = plant_base(segmentation, pot.as_ref(), &points);
@@ -339,6 +349,7 @@ pub fn skeleton_input(
                 .collect()
         },
         base,
+        pieces,
     }
 }
 
@@ -364,9 +375,8 @@ pub fn automatic_plant_skeleton(
         automatic_skeleton_from(&input.points, &up, &input.base, &options.skeleton)?;
     stem_rises(&tree, &up)?;
     let positions = &segmentation.points.positions;
-    let pieces = leaf_sheet_pieces(&segmentation.points, &segmentation.foreground.class, labels);
     let sheets: Vec<(Point3<f64>, u32)> = (0..positions.len().min(labels.segment_of.len()))
-        .filter(|&i| on_leaf_sheet(&segmentation.foreground, labels, &pieces, i))
+        .filter(|&i| on_leaf_sheet(&segmentation.foreground, labels, &input.pieces, i))
         .map(|i| (positions[i], labels.segment_of[i].max(0) as u32))
         .collect();
     stats.rims_pruned = remove_leaf_rims(
