@@ -184,18 +184,17 @@ pub fn tube_point_indices(
         return candidates.to_vec();
     };
     let radius = test.radius_spacings * spacing;
+    let sheet: Vec<bool> = (0..positions.len())
+        .into_par_iter()
+        .map(|i| counts_as_sheet(&segmentation.foreground, labels, pieces, i))
+        .collect();
     candidates
         .par_iter()
         .copied()
         .filter(|&i| {
-            let around = neighbours.within_radius_unsorted(&positions[i as usize], radius);
-            let sheet = around
-                .iter()
-                .filter(|found| {
-                    counts_as_sheet(&segmentation.foreground, labels, pieces, found.index)
-                })
-                .count();
-            sheet as f64 <= test.max_sheet_share * around.len() as f64
+            let (around, on_sheet) =
+                neighbours.count_within(&positions[i as usize], radius, |j| sheet[j]);
+            on_sheet as f64 <= test.max_sheet_share * around as f64
         })
         .collect()
 }

@@ -21,10 +21,11 @@ use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap};
 
 use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::{Branch, BranchTree, GeneralizedCylinder, Spline};
-use crate::graph::neighbours::Neighbours;
+use crate::graph::neighbours::{Neighbour, Neighbours};
 use crate::graph::shape::Shape;
 use crate::util::union_find::UnionFind;
 
@@ -233,9 +234,14 @@ fn connected_skeleton(
         Neighbours::new(points.iter().copied()).map_err(|_| SkeletonError::TooFewPoints(n))?;
     let mut edges: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
     let mut nearest = Vec::with_capacity(n);
-    for i in 0..n {
+    // The k-NN lists are found on all cores, then joined in the points' order.
+    let lists: Vec<Vec<Neighbour>> = (0..n)
+        .into_par_iter()
+        .map(|i| neighbours.around(i, k))
+        .collect();
+    for (i, list) in lists.into_iter().enumerate() {
         let mut first = f64::INFINITY;
-        for found in neighbours.around(i, k) {
+        for found in list {
             let j = found.index;
             if j == i {
                 continue;
@@ -325,20 +331,18 @@ fn connected_skeleton(
     }
     let mut pending: Vec<usize> = (0..groups.len()).filter(|&g| g != root_group).collect();
     let max_gap = options.max_gap * spacing;
+    // Each pending point's nearest connected point (distance, index): measured against the
+    // connected part once, then against each group as it joins.
+    let mut nearest_inside = vec![(f64::INFINITY, usize::MAX); n];
+    let inside: Vec<usize> = (0..n).filter(|&i| connected[i]).collect();
+    nearer_inside(&mut nearest_inside, &inside, &pending, &groups, points);
     loop {
-        let inside: Vec<usize> = (0..n).filter(|&i| connected[i]).collect();
-        let Ok(inside_neighbours) = Neighbours::new(inside.iter().map(|&i| points[i])) else {
-            break;
-        };
         let mut best: Option<(f64, usize, usize, usize)> = None;
         for (slot, &g) in pending.iter().enumerate() {
             for &i in &groups[g] {
-                let Some(found) = inside_neighbours.nearest(&points[i]) else {
-                    continue;
-                };
-                let d = found.distance();
+                let (d, to) = nearest_inside[i];
                 if d <= max_gap && best.is_none_or(|b| d < b.0) {
-                    best = Some((d, slot, i, inside[found.index]));
+                    best = Some((d, slot, i, to));
                 }
             }
         }
@@ -347,10 +351,17 @@ fn connected_skeleton(
         };
         edges[from].push((to, d));
         edges[to].push((from, d));
-        for &i in &groups[pending[slot]] {
+        let joined = pending.swap_remove(slot);
+        for &i in &groups[joined] {
             connected[i] = true;
         }
-        pending.swap_remove(slot);
+        nearer_inside(
+            &mut nearest_inside,
+            &groups[joined],
+            &pending,
+            &groups,
+            points,
+        );
         stats.components_joined += 1;
     }
 
@@ -598,6 +609,38 @@ fn connected_skeleton(
     })
 }
 
+/// Lowers each pending group's points' nearest connected point (`nearest`: distance, index)
+/// to the nearest of `joined` (points just connected) where that is strictly nearer.
+fn nearer_inside(
+    nearest: &mut [(f64, usize)],
+    joined: &[usize],
+    pending: &[usize],
+    groups: &[Vec<usize>],
+    points: &[Point3<f64>],
+) {
+    let Ok(tree) = Neighbours::new(joined.iter().map(|&i| points[i])) else {
+        return;
+    };
+    let queries: Vec<usize> = pending
+        .iter()
+        .flat_map(|&g| groups[g].iter().copied())
+        .collect();
+    let found: Vec<Option<(f64, usize)>> = queries
+        .par_iter()
+        .map(|&i| {
+            tree.nearest(&points[i])
+                .map(|f| (f.distance(), joined[f.index]))
+        })
+        .collect();
+    for (&i, found) in queries.iter().zip(found) {
+        if let Some(found) = found
+            && found.0 < nearest[i].0
+        {
+            nearest[i] = found;
+        }
+    }
+}
+
 /// A group of points is round enough for a piece of tube when its third principal spread is
 /// at least this share of its second (`Shape::flatness`): a half-visible ring gives about
 /// 0.44, a leaf fragment about 0.1.
@@ -641,6 +684,9 @@ fn bridge_pieces(
     // Per bridged branch: the share of its length, from its base, that is the bridge. A later
     // piece is not bridged onto a bridge: that is drawn where no point is.
     let mut bridge_share: HashMap<u32, f64> = HashMap::new();
+    // Each branch's axis samples, in the branches' order (a branch's axis does not change
+    // once it is in the tree; bridged pieces append theirs).
+    let mut axis_samples: Vec<Vec<(Point3<f64>, Vector3<f64>)>> = Vec::new();
     for piece in pieces {
         let piece_points: Vec<Point3<f64>> = piece.iter().map(|&i| points[i]).collect();
         let Ok(sub) = connected_skeleton(&piece_points, up, root, options, Role::Piece) else {
@@ -665,8 +711,10 @@ fn bridge_pieces(
         };
         let reach = REACH_LENGTHS * length;
         let mut best: Option<(f64, u32, f64, Point3<f64>)> = None;
-        for branch in branches.iter() {
-            let samples = branch.cylinder.skeleton.sample_by_arc_length(128);
+        for branch in &branches[axis_samples.len()..] {
+            axis_samples.push(branch.cylinder.skeleton.sample_by_arc_length(128));
+        }
+        for (branch, samples) in branches.iter().zip(&axis_samples) {
             let last = (samples.len().max(2) - 1) as f64;
             let drawn = bridge_share.get(&branch.id).copied().unwrap_or(0.0);
             for (k, (point, _)) in samples.iter().enumerate() {

@@ -16,6 +16,10 @@ pub struct Spline {
     /// Cumulative arc length at uniformly spaced curve parameters, for arc-length lookups.
     #[serde(skip)]
     arc_table: Vec<(f64, f64)>,
+    /// The curve's points at the arc table's parameters (the polyline that closest-point and
+    /// distance queries walk), so that queries do not evaluate the curve again.
+    #[serde(skip)]
+    arc_points: Vec<Point3<f64>>,
 }
 
 /// What a spline is stored as.
@@ -63,6 +67,7 @@ impl Spline {
         let mut spline = Self {
             control_points,
             arc_table: Vec::new(),
+            arc_points: Vec::new(),
         };
         spline.build_arc_table();
         Ok(spline)
@@ -109,17 +114,21 @@ impl Spline {
     fn build_arc_table(&mut self) {
         let samples = self.segments() * TABLE_SAMPLES_PER_SEGMENT;
         let mut table = Vec::with_capacity(samples + 1);
+        let mut points = Vec::with_capacity(samples + 1);
         let mut length = 0.0;
         let mut previous = self.point(0.0);
         table.push((0.0, 0.0));
+        points.push(previous);
         for k in 1..=samples {
             let t = k as f64 / samples as f64;
             let p = self.point(t);
             length += (p - previous).norm();
             previous = p;
             table.push((t, length));
+            points.push(p);
         }
         self.arc_table = table;
+        self.arc_points = points;
     }
 
     /// Total arc length.
@@ -167,32 +176,29 @@ impl Spline {
     pub fn closest_fraction(&self, p: &Point3<f64>) -> (f64, f64) {
         let total = self.length().max(1e-300);
         let mut best = (0.0, f64::INFINITY);
-        let mut previous = (self.point(0.0), 0.0);
-        for &(t, length) in &self.arc_table[1..] {
-            let point = self.point(t);
-            let ab = point - previous.0;
+        for (w, table) in self.arc_points.windows(2).zip(self.arc_table.windows(2)) {
+            let (start, end) = (w[0], w[1]);
+            let (start_length, end_length) = (table[0].1, table[1].1);
+            let ab = end - start;
             let along = if ab.norm_squared() < 1e-30 {
                 0.0
             } else {
-                ((p - previous.0).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0)
+                ((p - start).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0)
             };
-            let distance = (p - (previous.0 + ab * along)).norm();
+            let distance = (p - (start + ab * along)).norm();
             if distance < best.1 {
                 best = (
-                    (previous.1 + along * (length - previous.1)) / total,
+                    (start_length + along * (end_length - start_length)) / total,
                     distance,
                 );
             }
-            previous = (point, length);
         }
         (best.0.clamp(0.0, 1.0), best.1)
     }
 
-    /// Distance from `p` to the curve (sampled densely).
+    /// Distance from `p` to the curve (sampled densely: the arc table's polyline).
     pub fn distance_to(&self, p: &Point3<f64>) -> f64 {
-        let n = (self.segments() * TABLE_SAMPLES_PER_SEGMENT).max(2);
-        let points: Vec<Point3<f64>> = (0..=n).map(|k| self.point(k as f64 / n as f64)).collect();
-        points
+        self.arc_points
             .windows(2)
             .map(|w| point_segment_distance(p, &w[0], &w[1]))
             .fold(f64::INFINITY, f64::min)

@@ -103,6 +103,31 @@ impl Neighbours {
         self.within(query, radius, false)
     }
 
+    /// How many points lie within `radius` of `query` (inclusive), and how many of them
+    /// `counted` holds (by index): the counts of [`Neighbours::within_radius_unsorted`] without
+    /// building its list.
+    pub fn count_within(
+        &self,
+        query: &Point3<f64>,
+        radius: f64,
+        counted: impl Fn(usize) -> bool,
+    ) -> (usize, usize) {
+        if self.is_empty() || radius.is_nan() || radius < 0.0 {
+            return (0, 0);
+        }
+        let found = self
+            .tree
+            .query(&[query.x, query.y, query.z])
+            .within::<SquaredEuclidean<f64>>(radius * radius)
+            .unsorted()
+            .execute();
+        let held = found
+            .iter()
+            .filter(|found| counted(found.item as usize))
+            .count();
+        (found.len(), held)
+    }
+
     fn within(&self, query: &Point3<f64>, radius: f64, sorted: bool) -> Vec<Neighbour> {
         if self.is_empty() || radius.is_nan() || radius < 0.0 {
             return Vec::new();
@@ -211,5 +236,18 @@ mod tests {
         sorted.sort_unstable();
         assert_eq!(unsorted, sorted);
         assert!(neighbours.within_radius_unsorted(&query, -1.0).is_empty());
+        // Counting: the radius query's size, and how many of its points a predicate holds
+        // (against the brute-force count of even indices within the radius).
+        let even_inside = points
+            .iter()
+            .enumerate()
+            .filter(|(i, p)| i % 2 == 0 && (*p - query).norm_squared() <= radius * radius)
+            .count();
+        assert!(even_inside > 0 && even_inside < inside.len());
+        assert_eq!(
+            neighbours.count_within(&query, radius, |i| i % 2 == 0),
+            (inside.len(), even_inside)
+        );
+        assert_eq!(neighbours.count_within(&query, -1.0, |_| true), (0, 0));
     }
 }
