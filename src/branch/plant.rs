@@ -12,7 +12,7 @@ use super::skeleton::{
     PlantBase, SkeletonError, SkeletonOptions, SkeletonStats, automatic_skeleton_from,
 };
 use super::{BranchTree, CylinderMeshing};
-use crate::graph::neighbours::Neighbours;
+use crate::graph::neighbours::{Neighbours, spatial_order};
 use crate::graph::points::PointSet;
 use crate::graph::shape::Shape;
 use crate::model::ModelBranch;
@@ -188,14 +188,25 @@ pub fn tube_point_indices(
         .into_par_iter()
         .map(|i| counts_as_sheet(&segmentation.foreground, labels, pieces, i))
         .collect();
-    candidates
+    // Balls taken in space-filling-curve order share the tree's nodes from one to the next.
+    let at: Vec<Point3<f64>> = candidates.iter().map(|&i| positions[i as usize]).collect();
+    let order = spatial_order(&at);
+    let passes: Vec<bool> = order
         .par_iter()
-        .copied()
-        .filter(|&i| {
-            let (around, on_sheet) =
-                neighbours.count_within(&positions[i as usize], radius, |j| sheet[j]);
+        .map(|&k| {
+            let (around, on_sheet) = neighbours.count_within(&at[k], radius, |j| sheet[j]);
             on_sheet as f64 <= test.max_sheet_share * around as f64
         })
+        .collect();
+    let mut keep = vec![false; candidates.len()];
+    for (&k, pass) in order.iter().zip(passes) {
+        keep[k] = pass;
+    }
+    candidates
+        .iter()
+        .zip(keep)
+        .filter(|(_, keep)| *keep)
+        .map(|(&i, _)| i)
         .collect()
 }
 

@@ -115,17 +115,18 @@ impl Neighbours {
         if self.is_empty() || radius.is_nan() || radius < 0.0 {
             return (0, 0);
         }
-        let found = self
-            .tree
+        let (mut total, mut held) = (0, 0);
+        self.tree
             .query(&[query.x, query.y, query.z])
             .within::<SquaredEuclidean<f64>>(radius * radius)
             .unsorted()
-            .execute();
-        let held = found
-            .iter()
-            .filter(|found| counted(found.item as usize))
-            .count();
-        (found.len(), held)
+            .visit(|found| {
+                total += 1;
+                if counted(found.item as usize) {
+                    held += 1;
+                }
+            });
+        (total, held)
     }
 
     fn within(&self, query: &Point3<f64>, radius: f64, sorted: bool) -> Vec<Neighbour> {
@@ -163,6 +164,49 @@ impl Neighbours {
             })
             .collect()
     }
+}
+
+/// The points' indices in Morton (Z-curve) order over their bounding box (ties by index): a
+/// run of queries taken in this order visits the same parts of a tree one after the other,
+/// which keeps them in cache.
+pub fn spatial_order(points: &[Point3<f64>]) -> Vec<usize> {
+    const BITS: u32 = 21;
+    let finite = |p: &&Point3<f64>| p.iter().all(|c| c.is_finite());
+    let (mut low, mut high) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for p in points.iter().filter(finite) {
+        for axis in 0..3 {
+            low[axis] = low[axis].min(p[axis]);
+            high[axis] = high[axis].max(p[axis]);
+        }
+    }
+    let cells = f64::from(1u32 << BITS);
+    let cell = |p: &Point3<f64>, axis: usize| -> u64 {
+        let extent = high[axis] - low[axis];
+        if !(extent > 0.0) || !p[axis].is_finite() {
+            return 0;
+        }
+        ((p[axis] - low[axis]) / extent * cells).clamp(0.0, cells - 1.0) as u64
+    };
+    let spread = |mut v: u64| -> u64 {
+        // Bit k of v moves to bit 3k.
+        v &= 0x1f_ffff;
+        v = (v | (v << 32)) & 0x001f_0000_0000_ffff;
+        v = (v | (v << 16)) & 0x001f_0000_ff00_00ff;
+        v = (v | (v << 8)) & 0x100f_00f0_0f00_f00f;
+        v = (v | (v << 4)) & 0x10c3_0c30_c30c_30c3;
+        v = (v | (v << 2)) & 0x1249_2492_4924_9249;
+        v
+    };
+    let mut keyed: Vec<(u64, usize)> = points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let code = spread(cell(p, 0)) | (spread(cell(p, 1)) << 1) | (spread(cell(p, 2)) << 2);
+            (code, i)
+        })
+        .collect();
+    keyed.sort_unstable();
+    keyed.into_iter().map(|(_, i)| i).collect()
 }
 
 #[cfg(test)]
@@ -249,5 +293,40 @@ mod tests {
             (inside.len(), even_inside)
         );
         assert_eq!(neighbours.count_within(&query, -1.0, |_| true), (0, 0));
+    }
+
+    #[test]
+    fn spatial_order_is_a_permutation_that_keeps_neighbours_together() {
+        // A 16 × 16 × 16 grid listed with x fastest, and one point at (16, 16, 16) so that
+        // the bounding box's side is a power of two: in Morton order each run of 8 grid points
+        // is one 2 × 2 × 2 cell, and the far corner comes last.
+        let mut points = Vec::new();
+        for z in 0..16 {
+            for y in 0..16 {
+                for x in 0..16 {
+                    points.push(Point3::new(f64::from(x), f64::from(y), f64::from(z)));
+                }
+            }
+        }
+        points.push(Point3::new(16.0, 16.0, 16.0));
+        let order = spatial_order(&points);
+        let mut sorted = order.clone();
+        sorted.sort_unstable();
+        assert_eq!(sorted, (0..points.len()).collect::<Vec<_>>());
+        assert_eq!(order.last(), Some(&4096));
+        for cell in order[..4096].chunks(8) {
+            let corner = points[cell[0]];
+            assert!(corner.iter().all(|c| c % 2.0 == 0.0), "{corner:?}");
+            for &i in cell {
+                let offset = points[i] - corner;
+                assert!(offset.iter().all(|&c| c == 0.0 || c == 1.0), "{offset:?}");
+            }
+        }
+        // Degenerate input: no extent, non-finite coordinates, nothing.
+        let flat = vec![Point3::new(1.0, 2.0, 3.0); 3];
+        assert_eq!(spatial_order(&flat), vec![0, 1, 2]);
+        let odd = vec![Point3::new(f64::NAN, 0.0, 0.0), Point3::new(0.0, 1.0, 0.0)];
+        assert_eq!(spatial_order(&odd).len(), 2);
+        assert!(spatial_order(&[]).is_empty());
     }
 }
