@@ -182,7 +182,7 @@ pub fn spatial_order(points: &[Point3<f64>]) -> Vec<usize> {
     let cells = f64::from(1u32 << BITS);
     let cell = |p: &Point3<f64>, axis: usize| -> u64 {
         let extent = high[axis] - low[axis];
-        if !(extent > 0.0) || !p[axis].is_finite() {
+        if extent <= 0.0 || !extent.is_finite() || !p[axis].is_finite() {
             return 0;
         }
         ((p[axis] - low[axis]) / extent * cells).clamp(0.0, cells - 1.0) as u64
