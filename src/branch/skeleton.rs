@@ -234,25 +234,29 @@ fn connected_skeleton(
         Neighbours::new(points.iter().copied()).map_err(|_| SkeletonError::TooFewPoints(n))?;
     let mut edges: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
     let mut nearest = Vec::with_capacity(n);
-    // The k-NN lists are found on all cores, then joined in the points' order.
-    let lists: Vec<Vec<Neighbour>> = (0..n)
-        .into_par_iter()
-        .map(|i| neighbours.around(i, k))
-        .collect();
-    for (i, list) in lists.into_iter().enumerate() {
-        let mut first = f64::INFINITY;
-        for found in list {
-            let j = found.index;
-            if j == i {
-                continue;
+    // The k-NN lists are found on all cores a block of points at a time (so that they never
+    // all wait in memory), then joined in the points' order.
+    const KNN_BLOCK: usize = 1 << 16;
+    for start in (0..n).step_by(KNN_BLOCK) {
+        let lists: Vec<Vec<Neighbour>> = (start..(start + KNN_BLOCK).min(n))
+            .into_par_iter()
+            .map(|i| neighbours.around(i, k))
+            .collect();
+        for (i, list) in (start..).zip(lists) {
+            let mut first = f64::INFINITY;
+            for found in list {
+                let j = found.index;
+                if j == i {
+                    continue;
+                }
+                let d = found.distance();
+                first = first.min(d);
+                edges[i].push((j, d));
+                edges[j].push((i, d));
             }
-            let d = found.distance();
-            first = first.min(d);
-            edges[i].push((j, d));
-            edges[j].push((i, d));
-        }
-        if first.is_finite() {
-            nearest.push(first);
+            if first.is_finite() {
+                nearest.push(first);
+            }
         }
     }
     if nearest.is_empty() {
