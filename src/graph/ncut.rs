@@ -11,6 +11,8 @@
 //!
 //! Groups smaller than twice the minimum segment are not split.
 
+use std::sync::{Mutex, PoisonError};
+
 use serde::Serialize;
 
 use super::components::Adjacency;
@@ -334,56 +336,74 @@ pub struct NcutStats {
     pub rejected_splits: usize,
 }
 
-/// Splits every group recursively. `adjacency` is the whole graph (global node ids),
-/// `positions` the node positions and `plane_rms` their local plane RMS (see
-/// [`sheet_tolerance`]). Returns the final groups (global ids) and statistics.
-pub fn recursive_ncut(
-    adjacency: &Adjacency,
-    groups: Vec<Vec<u32>>,
-    positions: &[Point3<f64>],
-    plane_rms: &[f64],
-    options: &NcutOptions,
-) -> (Vec<Vec<u32>>, NcutStats) {
-    let mut stats = NcutStats::default();
-    let mut done = Vec::new();
-    let mut queue = groups;
-    let lanczos = LanczosOptions::default();
-    while let Some(group) = queue.pop() {
+/// What one step of the recursion did with a group.
+enum Step {
+    /// The group is final; `rejected` when its best split was judged no real part.
+    Final { group: Vec<u32>, rejected: bool },
+    /// The group fell apart into these connected pieces (no eigen solve).
+    Pieces(Vec<Vec<u32>>),
+    /// The group was split in two for this reason.
+    Split {
+        reason: SplitReason,
+        sides: [Vec<u32>; 2],
+    },
+}
+
+/// The recursion's inputs, shared by every step.
+struct Recursion<'a> {
+    adjacency: &'a Adjacency,
+    positions: &'a [Point3<f64>],
+    plane_rms: &'a [f64],
+    options: &'a NcutOptions,
+    lanczos: LanczosOptions,
+}
+
+impl Recursion<'_> {
+    /// One step on one group: a pure function of the group (its members and their order), so
+    /// the steps may run in any order and on any thread.
+    /// Returns the step and whether it solved an eigenproblem.
+    fn step(&self, group: Vec<u32>) -> (Step, bool) {
+        let options = self.options;
         if group.len() < 2 * options.min_segment_points {
-            done.push(group);
-            continue;
+            return (
+                Step::Final {
+                    group,
+                    rejected: false,
+                },
+                false,
+            );
         }
-        let sub = adjacency.induced(&group);
+        let sub = self.adjacency.induced(&group);
         // A group may have fallen apart after a split: handle each piece on its own.
         let components = sub.components();
         if components.count > 1 {
-            for piece in components.groups() {
-                queue.push(piece.iter().map(|&i| group[i as usize]).collect());
-            }
-            continue;
+            let pieces = components
+                .groups()
+                .into_iter()
+                .map(|piece| piece.iter().map(|&i| group[i as usize]).collect())
+                .collect();
+            return (Step::Pieces(pieces), false);
         }
-        stats.eigen_solves += 1;
-        let Some((_, fiedler)) = fiedler_vector(&sub, &lanczos) else {
-            done.push(group);
-            continue;
+        let unsplit = |group| Step::Final {
+            group,
+            rejected: false,
+        };
+        let Some((_, fiedler)) = fiedler_vector(&sub, &self.lanczos) else {
+            return (unsplit(group), true);
         };
         let Some(split) = best_sweep_split(&sub, &fiedler, options.min_segment_points) else {
-            done.push(group);
-            continue;
+            return (unsplit(group), true);
         };
-        let local_positions: Vec<Point3<f64>> =
-            group.iter().map(|&g| positions[g as usize]).collect();
+        let local_positions: Vec<Point3<f64>> = group
+            .iter()
+            .map(|&g| self.positions[g as usize])
+            .collect();
         let local_noise: Vec<f64> = group
             .iter()
-            .map(|&g| plane_rms.get(g as usize).copied().unwrap_or(0.0))
+            .map(|&g| self.plane_rms.get(g as usize).copied().unwrap_or(0.0))
             .collect();
-        match judge_split(&sub, &split, &local_positions, &local_noise, options) {
+        let step = match judge_split(&sub, &split, &local_positions, &local_noise, options) {
             Some(reason) => {
-                match reason {
-                    SplitReason::Boundary => stats.splits_boundary += 1,
-                    SplitReason::Bottleneck => stats.splits_bottleneck += 1,
-                    SplitReason::Shape => stats.splits_shape += 1,
-                }
                 let mut a = Vec::new();
                 let mut b = Vec::new();
                 for (i, &g) in group.iter().enumerate() {
@@ -393,17 +413,96 @@ pub fn recursive_ncut(
                         b.push(g);
                     }
                 }
-                queue.push(a);
-                queue.push(b);
+                Step::Split {
+                    reason,
+                    sides: [a, b],
+                }
             }
-            None => {
-                stats.rejected_splits += 1;
-                done.push(group);
+            None => Step::Final {
+                group,
+                rejected: true,
+            },
+        };
+        (step, true)
+    }
+}
+
+/// What the recursion has finished so far.
+#[derive(Default)]
+struct Finished {
+    groups: Vec<Vec<u32>>,
+    stats: NcutStats,
+}
+
+/// Runs one step on `group` and queues what it leaves to split on `scope`, so that the
+/// groups are worked on by every thread of the pool (work stealing, no deep call stacks).
+fn split_in_scope<'s>(
+    scope: &rayon::Scope<'s>,
+    recursion: &'s Recursion<'s>,
+    finished: &'s Mutex<Finished>,
+    group: Vec<u32>,
+) {
+    let (step, solved) = recursion.step(group);
+    let more = {
+        // A poisoned lock only means another step panicked; its panic is re-raised by the
+        // scope, so the tally here may go on.
+        let mut finished = finished.lock().unwrap_or_else(PoisonError::into_inner);
+        finished.stats.eigen_solves += usize::from(solved);
+        match step {
+            Step::Final { group, rejected } => {
+                finished.stats.rejected_splits += usize::from(rejected);
+                finished.groups.push(group);
+                Vec::new()
+            }
+            Step::Pieces(pieces) => pieces,
+            Step::Split { reason, sides } => {
+                match reason {
+                    SplitReason::Boundary => finished.stats.splits_boundary += 1,
+                    SplitReason::Bottleneck => finished.stats.splits_bottleneck += 1,
+                    SplitReason::Shape => finished.stats.splits_shape += 1,
+                }
+                sides.into()
             }
         }
+    };
+    for group in more {
+        scope.spawn(move |scope| split_in_scope(scope, recursion, finished, group));
     }
-    done.sort_by_key(|g| g.iter().copied().min());
-    (done, stats)
+}
+
+/// Splits every group recursively. `adjacency` is the whole graph (global node ids),
+/// `positions` the node positions and `plane_rms` their local plane RMS (see
+/// [`sheet_tolerance`]). Returns the final groups (global ids, ordered by their smallest id)
+/// and statistics.
+///
+/// Each group's fate depends on that group alone, so the groups are split on all threads of
+/// rayon's pool; the result is the same for any number of threads.
+pub fn recursive_ncut(
+    adjacency: &Adjacency,
+    groups: Vec<Vec<u32>>,
+    positions: &[Point3<f64>],
+    plane_rms: &[f64],
+    options: &NcutOptions,
+) -> (Vec<Vec<u32>>, NcutStats) {
+    let recursion = Recursion {
+        adjacency,
+        positions,
+        plane_rms,
+        options,
+        lanczos: LanczosOptions::default(),
+    };
+    let finished = Mutex::new(Finished::default());
+    rayon::scope(|scope| {
+        for group in groups {
+            let (recursion, finished) = (&recursion, &finished);
+            scope.spawn(move |scope| split_in_scope(scope, recursion, finished, group));
+        }
+    });
+    let Finished { mut groups, stats } = finished
+        .into_inner()
+        .unwrap_or_else(PoisonError::into_inner);
+    groups.sort_by_key(|g| g.iter().copied().min());
+    (groups, stats)
 }
 
 #[cfg(test)]
@@ -514,6 +613,87 @@ mod tests {
             &NcutOptions::default(),
         );
         assert_eq!(groups.len(), 1);
+    }
+
+    /// `joints.len() + 1` square patches of `side` × `side` points in a row, each joined to
+    /// the next along a side by edges of that joint's weight (1 inside a patch).
+    fn patch_row(side: usize, joints: &[f64]) -> (Adjacency, Vec<Point3<f64>>) {
+        let patches = joints.len() + 1;
+        let index = |patch: usize, i: usize, j: usize| (patch * side * side + i * side + j) as u32;
+        let mut edges = Vec::new();
+        let mut positions = Vec::new();
+        for patch in 0..patches {
+            for i in 0..side {
+                for j in 0..side {
+                    positions.push(Point3::new((patch * side + j) as f64, i as f64, 0.0));
+                    if j + 1 < side {
+                        edges.push((index(patch, i, j), index(patch, i, j + 1), 1.0));
+                    }
+                    if i + 1 < side {
+                        edges.push((index(patch, i, j), index(patch, i + 1, j), 1.0));
+                    }
+                }
+            }
+        }
+        for (patch, &joint) in joints.iter().enumerate() {
+            for i in 0..side {
+                edges.push((index(patch, i, side - 1), index(patch + 1, i, 0), joint));
+            }
+        }
+        (
+            Adjacency::from_edges(patches * side * side, edges.into_iter()),
+            positions,
+        )
+    }
+
+    #[test]
+    fn the_recursion_gives_the_same_groups_on_one_thread_and_on_many() {
+        // Eight patches joined by weak seams of different strengths, and the same row again
+        // as a second starting group (its ids offset), so that groups wait on both threads.
+        let joints = [0.05, 0.02, 0.08, 0.03, 0.06, 0.01, 0.04];
+        let (row, row_positions) = patch_row(10, &joints);
+        let n = row.num_nodes() as u32;
+        let mut edges = Vec::new();
+        for a in 0..n {
+            for (b, w) in row.row(a as usize) {
+                if (a as usize) < b {
+                    edges.push((a, b as u32, w));
+                    edges.push((a + n, b as u32 + n, w));
+                }
+            }
+        }
+        let adjacency = Adjacency::from_edges(2 * n as usize, edges.into_iter());
+        let mut positions = row_positions.clone();
+        positions.extend(row_positions.iter().map(|p| p + Vector3::new(0.0, 50.0, 0.0)));
+        let starts = vec![(0..n).collect::<Vec<u32>>(), (n..2 * n).collect()];
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                recursive_ncut(
+                    &adjacency,
+                    starts.clone(),
+                    &positions,
+                    &[],
+                    &NcutOptions::default(),
+                )
+            })
+        };
+        let (one, one_stats) = run(1);
+        // Every patch on its own, each found once per row.
+        assert_eq!(one.len(), 16, "{one_stats:?}");
+        assert!(one.iter().all(|g| g.len() == 100));
+        assert_eq!(one_stats.splits_boundary, 14);
+        for threads in [2, 4] {
+            let (many, many_stats) = run(threads);
+            assert_eq!(many, one, "{threads} threads");
+            assert_eq!(
+                serde_json::to_string(&many_stats).unwrap(),
+                serde_json::to_string(&one_stats).unwrap()
+            );
+        }
     }
 
     #[test]

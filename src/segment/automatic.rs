@@ -19,7 +19,7 @@ use crate::graph::components::Adjacency;
 use crate::graph::gradient::GradientImage;
 use crate::graph::local_shape::{self, FlatSheet, PLANE_NEIGHBOURS, median_spacing};
 use crate::graph::ncut::{
-    NcutOptions, NcutStats, median_noise, recursive_ncut, sheet_tolerance, two_sheet_split,
+    NcutOptions, NcutStats, Split, median_noise, recursive_ncut, sheet_tolerance, two_sheet_split,
 };
 use crate::graph::neighbours::Neighbours;
 use crate::graph::points::PointSet;
@@ -822,7 +822,7 @@ struct FoundLeafJudge<'o> {
     options: &'o NcutOptions,
     /// All the points, indexed for the bounded share; built at the first group that needs it
     /// (`None` where the index could not be built: then no group is judged a leaf).
-    all_points: std::cell::OnceCell<Option<Neighbours>>,
+    all_points: std::sync::OnceLock<Option<Neighbours>>,
 }
 
 /// Neighbours of the local shapes [`LeafParts::find_missed_leaves`] tells sheets by (as the
@@ -924,7 +924,7 @@ impl LeafParts<'_> {
             flat_facing: flat.facing(SHEET_SHAPE_NEIGHBOURS),
             heights,
             options,
-            all_points: std::cell::OnceCell::new(),
+            all_points: std::sync::OnceLock::new(),
         })
     }
 
@@ -1189,23 +1189,36 @@ impl LeafParts<'_> {
             .collect();
         let mut cuts = 0;
         let min_points = MIN_TOUCHING_SHARE_OF_TYPICAL_LEAF * typical;
-        while let Some(s) = queue.pop() {
-            let members: Vec<usize> = self.segments[s]
-                .points
-                .iter()
-                .map(|&p| p as usize)
-                .collect();
-            if (members.len() as f64) < min_points {
-                continue;
-            }
+        let members_of = |segment: &Segment| -> Option<Vec<usize>> {
+            let members: Vec<usize> = segment.points.iter().map(|&p| p as usize).collect();
+            ((members.len() as f64) >= min_points).then_some(members)
+        };
+        let bisect = |members: &[usize]| {
             let positions: Vec<Point3<f64>> = members.iter().map(|&i| self.positions[i]).collect();
-            let Some(split) = crate::graph::ncut::facing_bisection(
+            crate::graph::ncut::facing_bisection(
                 &positions,
-                &normals_of(&members),
+                &normals_of(members),
                 SHEET_SHAPE_NEIGHBOURS,
                 facing_scale,
                 min_side,
-            ) else {
+            )
+        };
+        // Each queued segment's bisection depends on its points alone: those of the segments
+        // as they are now are found on all cores first. A segment's points change only when it
+        // is cut, and then it is queued again and bisected anew.
+        let mut first_bisection: BTreeMap<usize, Option<Split>> = queue
+            .par_iter()
+            .filter_map(|&s| members_of(&self.segments[s]).map(|m| (s, bisect(&m))))
+            .collect();
+        while let Some(s) = queue.pop() {
+            let Some(members) = members_of(&self.segments[s]) else {
+                continue;
+            };
+            let split = match first_bisection.remove(&s) {
+                Some(split) => split,
+                None => bisect(&members),
+            };
+            let Some(split) = split else {
                 continue;
             };
             let width_ratio = self.segments[s].shape.width_ratio().max(1e-3);
@@ -1430,20 +1443,29 @@ impl LeafParts<'_> {
         let max_turn = PEEL_TURN_SCALE * (1.0 - judge.flat_facing).max(1e-3);
         let noise_of_group =
             |group: &[usize]| median(group.iter().filter_map(|i| noise_of.get(i).copied()));
-        let mut leaves: Vec<(Vec<usize>, f64)> = Vec::new();
-        for group in groups {
-            let noise = noise_of_group(&group).unwrap_or(0.0);
-            if self.is_found_leaf(&judge, points, &group, noise, MAX_FOUND_LEAF_BOUNDED_SHARE) {
-                leaves.push((group, noise));
-            } else if group.len() >= 2 * judge.min_points {
-                for part in self.peel(points, &group, max_turn) {
-                    let noise = noise_of_group(&part).unwrap_or(0.0);
-                    if self.is_found_leaf(&judge, points, &part, noise, MAX_PEELED_BOUNDED_SHARE) {
-                        leaves.push((part, noise));
-                    }
+        // Each group is judged on its own: on all cores, the leaves kept in the groups' order.
+        let groups: Vec<Vec<usize>> = groups.collect();
+        let this = &*self;
+        let leaves: Vec<(Vec<usize>, f64)> = groups
+            .into_par_iter()
+            .flat_map_iter(|group| {
+                let noise = noise_of_group(&group).unwrap_or(0.0);
+                if this.is_found_leaf(&judge, points, &group, noise, MAX_FOUND_LEAF_BOUNDED_SHARE) {
+                    return vec![(group, noise)];
                 }
-            }
-        }
+                if group.len() < 2 * judge.min_points {
+                    return Vec::new();
+                }
+                this.peel(points, &group, max_turn)
+                    .into_iter()
+                    .filter_map(|part| {
+                        let noise = noise_of_group(&part).unwrap_or(0.0);
+                        this.is_found_leaf(&judge, points, &part, noise, MAX_PEELED_BOUNDED_SHARE)
+                            .then_some((part, noise))
+                    })
+                    .collect()
+            })
+            .collect();
         for (group, noise) in leaves {
             let shape = Shape::of(group.iter().map(|&i| self.positions[i]));
             let s = self.segments.len();
