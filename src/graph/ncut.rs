@@ -394,10 +394,8 @@ impl Recursion<'_> {
         let Some(split) = best_sweep_split(&sub, &fiedler, options.min_segment_points) else {
             return (unsplit(group), true);
         };
-        let local_positions: Vec<Point3<f64>> = group
-            .iter()
-            .map(|&g| self.positions[g as usize])
-            .collect();
+        let local_positions: Vec<Point3<f64>> =
+            group.iter().map(|&g| self.positions[g as usize]).collect();
         let local_noise: Vec<f64> = group
             .iter()
             .map(|&g| self.plane_rms.get(g as usize).copied().unwrap_or(0.0))
@@ -664,7 +662,11 @@ mod tests {
         }
         let adjacency = Adjacency::from_edges(2 * n as usize, edges.into_iter());
         let mut positions = row_positions.clone();
-        positions.extend(row_positions.iter().map(|p| p + Vector3::new(0.0, 50.0, 0.0)));
+        positions.extend(
+            row_positions
+                .iter()
+                .map(|p| p + Vector3::new(0.0, 50.0, 0.0)),
+        );
         let starts = vec![(0..n).collect::<Vec<u32>>(), (n..2 * n).collect()];
         let run = |threads: usize| {
             let pool = rayon::ThreadPoolBuilder::new()
