@@ -510,29 +510,7 @@ mod tests {
     /// Two square grids of points side by side, joined along their touching edge by edges of
     /// weight `joint` (1 inside each grid).
     fn two_patches(side: usize, joint: f64) -> (Adjacency, Vec<Point3<f64>>) {
-        let mut edges = Vec::new();
-        let mut positions = Vec::new();
-        let index = |patch: usize, i: usize, j: usize| (patch * side * side + i * side + j) as u32;
-        for patch in 0..2 {
-            for i in 0..side {
-                for j in 0..side {
-                    positions.push(Point3::new((patch * side + j) as f64, i as f64, 0.0));
-                    if j + 1 < side {
-                        edges.push((index(patch, i, j), index(patch, i, j + 1), 1.0));
-                    }
-                    if i + 1 < side {
-                        edges.push((index(patch, i, j), index(patch, i + 1, j), 1.0));
-                    }
-                }
-            }
-        }
-        for i in 0..side {
-            edges.push((index(0, i, side - 1), index(1, i, 0), joint));
-        }
-        (
-            Adjacency::from_edges(2 * side * side, edges.into_iter()),
-            positions,
-        )
+        patch_row(side, &[joint])
     }
 
     /// Two square patches of `side` × `side` points 1 apart, the second folded up by `fold`
