@@ -364,14 +364,12 @@ impl Recursion<'_> {
     /// Returns the step and whether it solved an eigenproblem.
     fn step(&self, group: Vec<u32>) -> (Step, bool) {
         let options = self.options;
+        let unsplit = |group| Step::Final {
+            group,
+            rejected: false,
+        };
         if group.len() < 2 * options.min_segment_points {
-            return (
-                Step::Final {
-                    group,
-                    rejected: false,
-                },
-                false,
-            );
+            return (unsplit(group), false);
         }
         let sub = self.adjacency.induced(&group);
         // A group may have fallen apart after a split: handle each piece on its own.
@@ -384,10 +382,6 @@ impl Recursion<'_> {
                 .collect();
             return (Step::Pieces(pieces), false);
         }
-        let unsplit = |group| Step::Final {
-            group,
-            rejected: false,
-        };
         let Some((_, fiedler)) = fiedler_vector(&sub, &self.lanczos) else {
             return (unsplit(group), true);
         };
