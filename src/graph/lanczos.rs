@@ -63,16 +63,16 @@ pub fn largest_eigenpair(
         return None;
     }
     let mut rng = Rng::seed_from(options.seed);
+    // One modified Gram–Schmidt pass over the deflated vectors and the basis so far.
     let orthogonalize = |w: &mut [f64], basis: &[Vec<f64>]| {
-        // Twice is enough (Kahan–Parlett).
-        for _ in 0..2 {
-            for q in deflate.iter().chain(basis) {
-                let c = dot(q, w);
-                axpy(-c, q, w);
-            }
+        for q in deflate.iter().chain(basis) {
+            let c = dot(q, w);
+            axpy(-c, q, w);
         }
     };
     let mut q: Vec<f64> = (0..n).map(|_| rng.uniform() - 0.5).collect();
+    // A random start may lie anywhere: twice is enough (Kahan–Parlett).
+    orthogonalize(&mut q, &[]);
     orthogonalize(&mut q, &[]);
     if normalize(&mut q) == 0.0 {
         return None;
@@ -87,6 +87,13 @@ pub fn largest_eigenpair(
         apply(&basis[j], &mut w);
         let alpha = dot(&basis[j], &w);
         alphas.push(alpha);
+        // The three-term recurrence leaves `w` nearly orthogonal to the basis: what rounding
+        // adds along older vectors is tiny, and one pass removes it (full reorthogonalisation,
+        // Golub & Van Loan §10.3), where two passes were needed without the recurrence.
+        axpy(-alpha, &basis[j], &mut w);
+        if j > 0 {
+            axpy(-betas[j - 1], &basis[j - 1], &mut w);
+        }
         orthogonalize(&mut w, &basis);
         let beta = normalize(&mut w);
         let m = alphas.len();

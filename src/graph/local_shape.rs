@@ -27,30 +27,146 @@ pub fn shape_around(neighbours: &Neighbours, i: usize, k: usize) -> Shape {
     Shape::of(around.iter().map(|n| neighbours.point(n.index)))
 }
 
+/// Each point's nearest neighbours in a point set, searched once with one k-d tree and shared
+/// by the local features below, each of which reads as many of them as it needs: a feature of
+/// `k` neighbours reads the first `k + 1` of a list (the point itself included), the same
+/// points [`Neighbours::around`] gives for `k` (up to the order of points exactly as far).
+pub struct Neighbourhoods {
+    /// Points per list: `k + 1` for the largest `k` searched, at most all the points.
+    per_point: usize,
+    /// Row `i` (`per_point` entries): point `i`'s neighbours, nearest first.
+    indices: Vec<u32>,
+}
+
+impl Neighbourhoods {
+    /// The `k` nearest neighbours of every point and the point itself; `None` where the points
+    /// cannot be indexed (none at all, or more than a `u32` can number).
+    pub fn of(points: &PointSet, k: usize) -> Option<Self> {
+        if u32::try_from(points.len()).is_err() {
+            return None;
+        }
+        let neighbours = Neighbours::new(points.positions.iter().copied()).ok()?;
+        let per_point = (k + 1).min(neighbours.len()).max(1);
+        let rows: Vec<Vec<u32>> = (0..neighbours.len())
+            .into_par_iter()
+            .map(|i| {
+                let mut row: Vec<u32> = neighbours
+                    .around(i, k)
+                    .iter()
+                    .map(|n| n.index as u32)
+                    .collect();
+                // Only an empty tree answers short; keep every row `per_point` long.
+                row.resize(per_point, i as u32);
+                row
+            })
+            .collect();
+        Some(Self {
+            per_point,
+            indices: rows.concat(),
+        })
+    }
+
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.indices.len() / self.per_point
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.indices.is_empty()
+    }
+
+    /// Point `i` and its `k` nearest neighbours (fewer where fewer were searched), nearest
+    /// first, by index.
+    pub fn around(&self, i: usize, k: usize) -> impl Iterator<Item = usize> + Clone + '_ {
+        let row = &self.indices[i * self.per_point..(i + 1) * self.per_point];
+        row[..(k + 1).min(self.per_point)]
+            .iter()
+            .map(|&j| j as usize)
+    }
+
+    /// The principal-component shape of point `i`'s neighbourhood of `k` neighbours.
+    fn shape(&self, points: &PointSet, i: usize, k: usize) -> Shape {
+        Shape::of(self.around(i, k).map(|j| points.positions[j]))
+    }
+
+    /// [`local_shapes`] of `points` (the points these neighbourhoods were searched among).
+    pub fn shapes(&self, points: &PointSet, k: usize) -> Vec<LocalShape> {
+        (0..self.len())
+            .into_par_iter()
+            .map(|i| {
+                let shape = self.shape(points, i, k);
+                if shape.count < 4 {
+                    return SHAPE_FALLBACK;
+                }
+                LocalShape {
+                    thickness: shape.flatness(),
+                    elongation: shape.width_ratio(),
+                    normal: shape.normal(),
+                }
+            })
+            .collect()
+    }
+
+    /// [`local_planes`] of `points` (the points these neighbourhoods were searched among).
+    pub fn planes(&self, points: &PointSet, k: usize) -> Vec<LocalPlane> {
+        (0..self.len())
+            .into_par_iter()
+            .map(|i| {
+                let shape = self.shape(points, i, k);
+                LocalPlane {
+                    normal: shape.normal(),
+                    rms: shape.eigenvalues[2].sqrt(),
+                }
+            })
+            .collect()
+    }
+
+    /// [`normal_coherence`] of the points' `normals` over `k` neighbours.
+    pub fn normal_coherence(&self, normals: &[nalgebra::Vector3<f64>], k: usize) -> Vec<f64> {
+        (0..self.len())
+            .into_par_iter()
+            .map(|i| {
+                let mut agreement: Vec<f64> = self
+                    .around(i, k)
+                    .filter(|&j| j != i)
+                    .map(|j| normals[j].dot(&normals[i]).abs())
+                    .collect();
+                if agreement.is_empty() {
+                    return 1.0;
+                }
+                agreement.sort_by(f64::total_cmp);
+                agreement[agreement.len() / 2]
+            })
+            .collect()
+    }
+
+    /// [`median_spacing`] of `points` (the points these neighbourhoods were searched among).
+    pub fn median_spacing(&self, points: &PointSet) -> f64 {
+        let distances: Vec<f64> = (0..self.len())
+            .into_par_iter()
+            .filter_map(|i| {
+                self.around(i, 2)
+                    .find(|&j| j != i)
+                    .map(|j| (points.positions[j] - points.positions[i]).norm())
+            })
+            .collect();
+        median(distances).unwrap_or(0.0)
+    }
+}
+
+/// What [`local_shapes`] reports for a point of too few neighbours: a flat patch facing up.
+const SHAPE_FALLBACK: LocalShape = LocalShape {
+    thickness: 0.0,
+    elongation: 1.0,
+    normal: nalgebra::Vector3::new(0.0, 0.0, 1.0),
+};
+
 /// Local shapes of every point from its `k` nearest neighbours (itself included).
 pub fn local_shapes(points: &PointSet, k: usize) -> Vec<LocalShape> {
-    let fallback = LocalShape {
-        thickness: 0.0,
-        elongation: 1.0,
-        normal: nalgebra::Vector3::z(),
-    };
-    let Ok(neighbours) = Neighbours::new(points.positions.iter().copied()) else {
-        return vec![fallback; points.len()];
-    };
-    (0..neighbours.len())
-        .into_par_iter()
-        .map(|i| {
-            let shape = shape_around(&neighbours, i, k);
-            if shape.count < 4 {
-                return fallback;
-            }
-            LocalShape {
-                thickness: shape.flatness(),
-                elongation: shape.width_ratio(),
-                normal: shape.normal(),
-            }
-        })
-        .collect()
+    match Neighbourhoods::of(points, k) {
+        Some(neighbourhoods) => neighbourhoods.shapes(points, k),
+        None => vec![SHAPE_FALLBACK; points.len()],
+    }
 }
 
 /// Unit normals from the principal components of each point's `k` nearest neighbours and
@@ -75,23 +191,16 @@ pub struct LocalPlane {
 /// Best-fit planes of each point's `k` nearest neighbours and itself (a z-facing plane of zero
 /// RMS where the points cannot be indexed).
 pub fn local_planes(points: &PointSet, k: usize) -> Vec<LocalPlane> {
-    let fallback = LocalPlane {
-        normal: nalgebra::Vector3::z(),
-        rms: 0.0,
-    };
-    let Ok(neighbours) = Neighbours::new(points.positions.iter().copied()) else {
-        return vec![fallback; points.len()];
-    };
-    (0..neighbours.len())
-        .into_par_iter()
-        .map(|i| {
-            let shape = shape_around(&neighbours, i, k);
+    match Neighbourhoods::of(points, k) {
+        Some(neighbourhoods) => neighbourhoods.planes(points, k),
+        None => vec![
             LocalPlane {
-                normal: shape.normal(),
-                rms: shape.eigenvalues[2].sqrt(),
-            }
-        })
-        .collect()
+                normal: nalgebra::Vector3::z(),
+                rms: 0.0,
+            };
+            points.len()
+        ],
+    }
 }
 
 /// How consistently the surface around each point faces one way (stems are found where the
@@ -105,45 +214,16 @@ pub fn normal_coherence(
     normals: &[nalgebra::Vector3<f64>],
     k: usize,
 ) -> Vec<f64> {
-    let Ok(neighbours) = Neighbours::new(points.positions.iter().copied()) else {
-        return vec![1.0; points.len()];
-    };
-    (0..neighbours.len())
-        .into_par_iter()
-        .map(|i| {
-            let mut agreement: Vec<f64> = neighbours
-                .around(i, k)
-                .iter()
-                .filter(|n| n.index != i)
-                .map(|n| normals[n.index].dot(&normals[i]).abs())
-                .collect();
-            if agreement.is_empty() {
-                return 1.0;
-            }
-            agreement.sort_by(f64::total_cmp);
-            agreement[agreement.len() / 2]
-        })
-        .collect()
+    match Neighbourhoods::of(points, k) {
+        Some(neighbourhoods) => neighbourhoods.normal_coherence(normals, k),
+        None => vec![1.0; points.len()],
+    }
 }
 
 /// Median distance from each point to its nearest other point (0 for fewer than 2 points).
 pub fn median_spacing(points: &PointSet) -> f64 {
-    let Ok(neighbours) = Neighbours::new(points.positions.iter().copied()) else {
-        return 0.0;
-    };
-    let distances: Vec<f64> = (0..neighbours.len())
-        .into_par_iter()
-        .filter_map(|i| {
-            let p = neighbours.point(i);
-            neighbours
-                .around(i, 2)
-                .iter()
-                .filter(|n| n.index != i)
-                .map(|n| (neighbours.point(n.index) - p).norm())
-                .next()
-        })
-        .collect();
-    median(distances).unwrap_or(0.0)
+    Neighbourhoods::of(points, 2)
+        .map_or(0.0, |neighbourhoods| neighbourhoods.median_spacing(points))
 }
 
 /// Points simulated on a [`FlatSheet`].

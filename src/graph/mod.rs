@@ -29,7 +29,6 @@ use serde::Serialize;
 
 use gradient::GradientImage;
 pub use local_shape::estimate_normals;
-use neighbours::Neighbours;
 use points::{PointSet, common_views};
 
 use crate::scene::Camera;
@@ -84,12 +83,18 @@ pub struct PointGraph {
     pub options: GraphOptions,
     /// Edges dropped because their ends share no view.
     pub dropped_not_covisible: usize,
-    /// Unoriented unit normal per node (PCA of its 10 nearest neighbours).
+    /// Unoriented unit normal per node (PCA of its [`GRAPH_PLANE_NEIGHBOURS`] nearest neighbours).
     pub normals: Vec<nalgebra::Vector3<f64>>,
-    /// RMS distance of each node's 10 nearest neighbours from their plane (model units): the
+    /// RMS distance of each node's [`GRAPH_PLANE_NEIGHBOURS`] nearest neighbours from their plane (model units): the
     /// local surface noise the sheet tests allow for ([`ncut::sheet_tolerance`]).
     pub plane_rms: Vec<f64>,
+    /// Median distance from a node to its nearest other node (model units; 0 for fewer than
+    /// two nodes): [`local_shape::median_spacing`] of the graph's points.
+    pub median_spacing: f64,
 }
+
+/// Neighbours of each node's local plane ([`PointGraph::normals`], [`PointGraph::plane_rms`]).
+const GRAPH_PLANE_NEIGHBOURS: usize = 10;
 
 /// Root mean square of the values below their 99th percentile (a scale robust to outliers).
 fn trimmed_rms(values: &mut [f32]) -> f64 {
@@ -108,24 +113,24 @@ fn trimmed_rms(values: &mut [f32]) -> f64 {
 
 /// K-nearest-neighbour pairs `(i, j)` with `i < j`, deduplicated.
 pub fn knn_pairs(points: &PointSet, k: usize) -> Vec<(u32, u32)> {
-    let n = points.len();
-    if n < 2 || k == 0 {
+    if points.len() < 2 || k == 0 {
         return Vec::new();
     }
-    let Ok(neighbours) = Neighbours::new(points.positions.iter().copied()) else {
-        return Vec::new();
-    };
-    let mut pairs: Vec<(u32, u32)> = (0..n)
+    local_shape::Neighbourhoods::of(points, k).map_or_else(Vec::new, |neighbourhoods| {
+        neighbourhood_pairs(&neighbourhoods, k)
+    })
+}
+
+/// The pairs of [`knn_pairs`] from neighbourhoods searched for at least `k` neighbours.
+fn neighbourhood_pairs(neighbourhoods: &local_shape::Neighbourhoods, k: usize) -> Vec<(u32, u32)> {
+    let mut pairs: Vec<(u32, u32)> = (0..neighbourhoods.len())
         .into_par_iter()
         .flat_map_iter(|i| {
-            neighbours
+            neighbourhoods
                 .around(i, k)
-                .into_iter()
-                .map(|r| r.index)
                 .filter(move |&j| j != i)
                 .take(k)
                 .map(move |j| (i.min(j) as u32, i.max(j) as u32))
-                .collect::<Vec<_>>()
         })
         .collect();
     pairs.par_sort_unstable();
@@ -143,9 +148,22 @@ impl PointGraph {
     /// weights and the threshold partition. `views[v]` describes view index `v` of the point
     /// set; views without a gradient image do not contribute to `d2D`.
     pub fn build(points: &PointSet, views: &[ViewData<'_>], options: GraphOptions) -> Self {
-        let pairs = knn_pairs(points, options.knn);
+        // One neighbour search serves the edges, the local planes and the spacing.
+        let neighbourhoods =
+            local_shape::Neighbourhoods::of(points, options.knn.max(GRAPH_PLANE_NEIGHBOURS));
+        let (pairs, planes, median_spacing) = match &neighbourhoods {
+            Some(around) if points.len() >= 2 => (
+                neighbourhood_pairs(around, options.knn),
+                around.planes(points, GRAPH_PLANE_NEIGHBOURS),
+                around.median_spacing(points),
+            ),
+            _ => (
+                Vec::new(),
+                local_shape::local_planes(points, GRAPH_PLANE_NEIGHBOURS),
+                0.0,
+            ),
+        };
         let use_images = options.alpha > 0.0;
-        let planes = local_shape::local_planes(points, 10);
         let normals: Vec<nalgebra::Vector3<f64>> = planes.iter().map(|p| p.normal).collect();
         let plane_rms: Vec<f64> = planes.iter().map(|p| p.rms).collect();
         let depth_maps = use_images.then(|| visibility::SplatDepthMaps::build(points, views, 2.0));
@@ -250,6 +268,7 @@ impl PointGraph {
             dropped_not_covisible,
             normals,
             plane_rms,
+            median_spacing,
         };
         for e in &mut edges {
             e.weight = graph.weight(e.d3d as f64, e.d2d as f64) as f32;

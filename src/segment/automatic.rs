@@ -17,7 +17,7 @@ use super::foreground::{
 use super::photometric::PhotometricOptions;
 use crate::graph::components::Adjacency;
 use crate::graph::gradient::GradientImage;
-use crate::graph::local_shape::{self, FlatSheet, PLANE_NEIGHBOURS, median_spacing};
+use crate::graph::local_shape::{self, FlatSheet, PLANE_NEIGHBOURS};
 use crate::graph::ncut::{
     NcutOptions, NcutStats, Split, median_noise, recursive_ncut, sheet_tolerance, two_sheet_split,
 };
@@ -1599,7 +1599,7 @@ pub fn segment_scene(
     let heights = PlantHeights::of(&plant_points.positions, &foreground);
 
     // Noise lowers a leaf's facing: compare with a flat sheet sampled like these points.
-    let spacing = median_spacing(&plant_points);
+    let spacing = graph.median_spacing;
     let plane_rms = median(graph.plane_rms.iter().copied()).unwrap_or(0.0);
     let flat_facing =
         FlatSheet::like(spacing, plane_rms).map_or(1.0, |sheet| sheet.facing(PLANE_NEIGHBOURS));

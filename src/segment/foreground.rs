@@ -398,18 +398,26 @@ pub fn separate_foreground(
     // Stems: points whose surroundings turn around a thin tube (incoherent normals).
     let plant: Vec<usize> = (0..n).filter(|&i| class[i] == PointClass::Plant).collect();
     let plant_points = points.subset(&plant);
-    let normals: Vec<Vector3<f64>> =
-        local_shape::local_shapes(&plant_points, STEM_NORMAL_NEIGHBOURS)
+    // One neighbour search serves the normals, their coherence, the planes and the spacing.
+    let most_neighbours = STEM_NORMAL_NEIGHBOURS
+        .max(options.stem_neighbours)
+        .max(local_shape::PLANE_NEIGHBOURS);
+    let neighbourhoods = local_shape::Neighbourhoods::of(&plant_points, most_neighbours);
+    let measured = neighbourhoods.as_ref().map(|around| {
+        let normals: Vec<Vector3<f64>> = around
+            .shapes(&plant_points, STEM_NORMAL_NEIGHBOURS)
             .iter()
             .map(|s| s.normal)
             .collect();
-    let coherence = local_shape::normal_coherence(&plant_points, &normals, options.stem_neighbours);
-    let planes = local_shape::local_planes(&plant_points, local_shape::PLANE_NEIGHBOURS);
-    let flat = local_shape::FlatSheet::like(
-        local_shape::median_spacing(&plant_points),
-        median(planes.iter().map(|p| p.rms)).unwrap_or(0.0),
-    )
-    .map_or(1.0, |sheet| {
+        let coherence = around.normal_coherence(&normals, options.stem_neighbours);
+        let planes = around.planes(&plant_points, local_shape::PLANE_NEIGHBOURS);
+        let plane_rms = median(planes.iter().map(|p| p.rms)).unwrap_or(0.0);
+        (coherence, around.median_spacing(&plant_points), plane_rms)
+    });
+    // Points no tree can index are all coherent, like a flat sheet's.
+    let (coherence, spacing, plane_rms) =
+        measured.unwrap_or_else(|| (vec![1.0; plant_points.len()], 0.0, 0.0));
+    let flat = local_shape::FlatSheet::like(spacing, plane_rms).map_or(1.0, |sheet| {
         sheet.coherence(
             STEM_NORMAL_NEIGHBOURS,
             options.stem_neighbours,
