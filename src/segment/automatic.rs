@@ -1410,7 +1410,15 @@ impl LeafParts<'_> {
         let left: Vec<usize> = (0..self.positions.len())
             .filter(|&i| candidate[i])
             .collect();
-        let shapes = local_shape::local_shapes(&points.subset(&left), SHEET_SHAPE_NEIGHBOURS);
+        // One neighbour search serves the shapes and the planes.
+        let left_points = points.subset(&left);
+        let Some(around) = local_shape::Neighbourhoods::of(
+            &left_points,
+            SHEET_SHAPE_NEIGHBOURS.max(PLANE_NEIGHBOURS),
+        ) else {
+            return 0;
+        };
+        let shapes = around.shapes(&left_points, SHEET_SHAPE_NEIGHBOURS);
         let sheet_points: Vec<usize> = on_sheets(&shapes, min_elongation, max_thickness)
             .into_iter()
             .map(|k| left[k])
@@ -1418,7 +1426,7 @@ impl LeafParts<'_> {
         if sheet_points.len() < options.ncut.min_segment_points {
             return 0;
         }
-        let planes = local_shape::local_planes(&points.subset(&left), PLANE_NEIGHBOURS);
+        let planes = around.planes(&left_points, PLANE_NEIGHBOURS);
         let noise_of: std::collections::HashMap<usize, f64> = left
             .iter()
             .zip(&planes)
