@@ -127,16 +127,7 @@ pub fn largest_eigenpair(
 /// The largest eigenvalue of the symmetric tridiagonal matrix of diagonal `diagonal` and
 /// off-diagonal `off` (`off[i]` couples rows `i` and `i + 1`) and its unit eigenvector (dense).
 fn top_eigenpair(diagonal: &[f64], off: &[f64]) -> Option<(f64, Vec<f64>)> {
-    let m = diagonal.len();
-    let mut t = DMatrix::zeros(m, m);
-    for i in 0..m {
-        t[(i, i)] = diagonal[i];
-        if i + 1 < m {
-            t[(i, i + 1)] = off[i];
-            t[(i + 1, i)] = off[i];
-        }
-    }
-    let eigen = SymmetricEigen::new(t);
+    let eigen = SymmetricEigen::new(tridiagonal(diagonal, off));
     let (k, &theta) = eigen
         .eigenvalues
         .iter()
@@ -146,6 +137,20 @@ fn top_eigenpair(diagonal: &[f64], off: &[f64]) -> Option<(f64, Vec<f64>)> {
         theta,
         eigen.eigenvectors.column(k).iter().copied().collect(),
     ))
+}
+
+/// The dense symmetric tridiagonal matrix of diagonal `diagonal` and off-diagonal `off`.
+fn tridiagonal(diagonal: &[f64], off: &[f64]) -> DMatrix<f64> {
+    let m = diagonal.len();
+    let mut t = DMatrix::zeros(m, m);
+    for i in 0..m {
+        t[(i, i)] = diagonal[i];
+        if i + 1 < m {
+            t[(i, i + 1)] = off[i];
+            t[(i + 1, i)] = off[i];
+        }
+    }
+    t
 }
 
 /// The largest eigenvalue of the symmetric tridiagonal matrix of [`top_eigenpair`] and the
@@ -283,17 +288,7 @@ mod tests {
             );
             // The top eigenvalue can be repeated, where the eigenvector is not unique: compare
             // only where it is well separated from the next one.
-            let eigen = SymmetricEigen::new({
-                let mut t = DMatrix::zeros(m, m);
-                for i in 0..m {
-                    t[(i, i)] = diagonal[i];
-                    if i + 1 < m {
-                        t[(i, i + 1)] = off[i];
-                        t[(i + 1, i)] = off[i];
-                    }
-                }
-                t
-            });
+            let eigen = SymmetricEigen::new(tridiagonal(&diagonal, &off));
             let mut sorted: Vec<f64> = eigen.eigenvalues.iter().copied().collect();
             sorted.sort_by(|a, b| b.total_cmp(a));
             let gap = if m > 1 { sorted[0] - sorted[1] } else { 1.0 };

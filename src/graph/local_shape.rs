@@ -412,6 +412,56 @@ mod tests {
     }
 
     #[test]
+    fn one_neighbour_search_gives_every_feature_of_fewer_neighbours() {
+        // A noisy sheet beside a tube, at random (no two points exactly as far from a third).
+        let mut rng = crate::util::rng::Rng::seed_from(5);
+        let mut positions: Vec<Point3<f64>> = (0..600)
+            .map(|_| {
+                Point3::new(
+                    rng.uniform() * 0.05,
+                    rng.uniform() * 0.05,
+                    rng.normal() * 2e-4,
+                )
+            })
+            .collect();
+        positions.extend(
+            tube(Point3::new(0.07, 0.02, 0.0), 0.002, 0.03, 0.001)
+                .into_iter()
+                .map(|p| p + Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 1e-5),
+        );
+        let points = set(positions);
+        let tree = Neighbours::new(points.positions.iter().copied()).unwrap();
+        let shared = Neighbourhoods::of(&points, 20).unwrap();
+        assert_eq!(shared.len(), points.len());
+        for k in [1, 2, 8, 10, 20] {
+            for i in 0..points.len() {
+                let own: Vec<usize> = tree.around(i, k).iter().map(|n| n.index).collect();
+                assert_eq!(
+                    shared.around(i, k).collect::<Vec<_>>(),
+                    own,
+                    "point {i}, k {k}"
+                );
+            }
+        }
+        // More than were searched: all that were.
+        assert_eq!(shared.around(0, 50).count(), 21);
+        assert_eq!(shared.shapes(&points, 8), local_shapes(&points, 8));
+        assert_eq!(shared.planes(&points, 10), local_planes(&points, 10));
+        let normals: Vec<Vector3<f64>> =
+            shared.shapes(&points, 8).iter().map(|s| s.normal).collect();
+        assert_eq!(
+            shared.normal_coherence(&normals, 20),
+            normal_coherence(&points, &normals, 20)
+        );
+        assert_eq!(shared.median_spacing(&points), median_spacing(&points));
+        // Fewer points than neighbours wanted: every list holds them all.
+        let few = set(points.positions[..5].to_vec());
+        let all = Neighbourhoods::of(&few, 20).unwrap();
+        assert!((0..5).all(|i| all.around(i, 20).count() == 5));
+        assert!(Neighbourhoods::of(&set(Vec::new()), 20).is_none_or(|n| n.is_empty()));
+    }
+
+    #[test]
     fn median_spacing_of_a_grid_is_its_step() {
         let grid = set(patch(
             Point3::origin(),
