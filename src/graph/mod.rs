@@ -152,12 +152,13 @@ impl PointGraph {
         let neighbourhoods =
             local_shape::Neighbourhoods::of(points, options.knn.max(GRAPH_PLANE_NEIGHBOURS));
         let (pairs, planes, median_spacing) = match &neighbourhoods {
-            Some(around) if points.len() >= 2 => (
+            Some(around) => (
                 neighbourhood_pairs(around, options.knn),
                 around.planes(points, GRAPH_PLANE_NEIGHBOURS),
                 around.median_spacing(points),
             ),
-            _ => (
+            // No tree over these points: no edges, and `local_planes`' fallback planes.
+            None => (
                 Vec::new(),
                 local_shape::local_planes(points, GRAPH_PLANE_NEIGHBOURS),
                 0.0,

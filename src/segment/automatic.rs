@@ -1924,14 +1924,7 @@ mod tests {
             }
         }
         let points = green_points(positions);
-        let graph = PointGraph::build(
-            &points,
-            &[],
-            GraphOptions {
-                alpha: 0.0,
-                ..GraphOptions::default()
-            },
-        );
+        let graph = graph_without_images(&points);
         let options = NcutOptions::default();
         let (merged, merges) = merge_sheets(
             groups.clone(),
@@ -1953,6 +1946,18 @@ mod tests {
             .collect();
         found.sort();
         assert_eq!(found, vec![sheet, groups[3].clone()]);
+    }
+
+    /// The kNN graph of `points` from 3D distances alone (no image gradients).
+    fn graph_without_images(points: &PointSet) -> PointGraph {
+        PointGraph::build(
+            points,
+            &[],
+            GraphOptions {
+                alpha: 0.0,
+                ..GraphOptions::default()
+            },
+        )
     }
 
     fn green_points(positions: Vec<Point3<f64>>) -> PointSet {
@@ -2845,14 +2850,7 @@ mod tests {
         }
         let n = positions.len();
         let points = green_points(positions);
-        let graph = PointGraph::build(
-            &points,
-            &[],
-            GraphOptions {
-                alpha: 0.0,
-                ..GraphOptions::default()
-            },
-        );
+        let graph = graph_without_images(&points);
         let adjacency = graph.adjacency();
         let foreground = upright(
             PointClass::Plant,
