@@ -12,7 +12,10 @@
 //! (seeds 5 and 9, where the rule was found) the union of two pieces of one leaf had 0.93–1.2
 //! times the rougher piece's absolute residual, that of two neighbouring leaves 1.25–5.5 times.
 
+use std::collections::HashMap;
+
 use nalgebra::Point3;
+use rayon::prelude::*;
 
 use super::automatic::{MIN_SHARE_OF_TYPICAL_LEAF, Segment, SegmentLabel, typical_leaf_points};
 use crate::graph::neighbours::Neighbours;
@@ -108,6 +111,56 @@ impl Member {
     }
 }
 
+/// Two leaf segments (points and measures) that [`join_leaf_pieces`] may join.
+struct Pair<'a> {
+    a: (&'a [u32], &'a Member),
+    b: (&'a [u32], &'a Member),
+}
+
+impl Pair<'_> {
+    /// The roughness growth of the union (its roughness over the rougher segment's) where the
+    /// pair may be joined: one of them is a piece (fewer than `limit` points), their nearest
+    /// points lie within `gap`, the union is no longer than `longest` and grows rough by at
+    /// most [`PIECE_UNION_ROUGHNESS`]. `None` otherwise.
+    fn union_growth(
+        &self,
+        positions: &[Point3<f64>],
+        limit: f64,
+        gap: f64,
+        longest: f64,
+    ) -> Option<f64> {
+        let ((points_a, ma), (points_b, mb)) = (self.a, self.b);
+        if points_a.len().min(points_b.len()) as f64 >= limit {
+            return None;
+        }
+        if (ma.centre - mb.centre).norm() > ma.radius + mb.radius + gap
+            || !(ma.rough.is_finite() && mb.rough.is_finite())
+        {
+            return None;
+        }
+        // The smaller segment's points against the larger one's tree; only those within
+        // `gap` of the larger one's bounding sphere can come that near.
+        let (small, large) = if points_a.len() <= points_b.len() {
+            (points_a, mb)
+        } else {
+            (points_b, ma)
+        };
+        let tree = large.tree.as_ref()?;
+        let reach = large.radius + gap;
+        let near = small.iter().any(|&i| {
+            let p = &positions[i as usize];
+            (p - large.centre).norm() <= reach && tree.nearest_one(p).distance() <= gap
+        });
+        if !near {
+            return None;
+        }
+        let union: Vec<u32> = points_a.iter().chain(points_b).copied().collect();
+        let (shape, union_rough) = roughness(positions, &union);
+        let growth = union_rough / ma.rough.max(mb.rough).max(1e-300);
+        (growth <= PIECE_UNION_ROUGHNESS && shape.length() <= longest).then_some(growth)
+    }
+}
+
 /// Joins pieces of one leaf (see the module docs) among the leaf-labelled `segments`, in place,
 /// smoothest union first and again until nothing joins (a leaf in three pieces becomes one):
 /// the later segment's points go to the earlier one, the emptied segment is removed and the ids
@@ -131,6 +184,7 @@ pub fn join_leaf_pieces(
     // Per segment, kept until a join changes it: its points' search tree, bounding sphere
     // (centroid, radius, to skip pairs that cannot come near) and roughness.
     let mut cache: Vec<Option<Member>> = (0..segments.len()).map(|_| None).collect();
+    let mut verdicts: HashMap<(usize, usize), Option<f64>> = HashMap::new();
     loop {
         // Leaf segments above the crumb floor; of any two joined, one is a piece.
         let members: Vec<usize> = (0..segments.len())
@@ -144,45 +198,35 @@ pub fn join_leaf_pieces(
                 cache[s] = Some(Member::of(positions, &segments[s].points));
             }
         }
-        // Candidate joins, smoothest union first.
+        // Candidate joins, smoothest union first. A pair's verdict depends on its two
+        // segments alone: one kept from an earlier round holds until a join changes either.
+        let mut fresh: Vec<(usize, usize)> = Vec::new();
+        for (k, &a) in members.iter().enumerate() {
+            for &b in &members[k + 1..] {
+                if !verdicts.contains_key(&(a, b)) {
+                    fresh.push((a, b));
+                }
+            }
+        }
+        let judged: Vec<Option<f64>> = fresh
+            .par_iter()
+            .map(|&(a, b)| {
+                let (Some(ma), Some(mb)) = (&cache[a], &cache[b]) else {
+                    return None;
+                };
+                let pair = Pair {
+                    a: (&segments[a].points, ma),
+                    b: (&segments[b].points, mb),
+                };
+                pair.union_growth(positions, limit, gap, longest)
+            })
+            .collect();
+        verdicts.extend(fresh.into_iter().zip(judged));
         let mut candidates: Vec<(f64, usize, usize)> = Vec::new();
         for (k, &a) in members.iter().enumerate() {
             for &b in &members[k + 1..] {
-                let (size_a, size_b) = (segments[a].points.len(), segments[b].points.len());
-                if size_a.min(size_b) as f64 >= limit {
-                    continue;
-                }
-                let (Some(ma), Some(mb)) = (&cache[a], &cache[b]) else {
-                    continue;
-                };
-                if (ma.centre - mb.centre).norm() > ma.radius + mb.radius + gap
-                    || !(ma.rough.is_finite() && mb.rough.is_finite())
-                {
-                    continue;
-                }
-                // The smaller segment's points against the larger one's tree.
-                let (small, large) = if size_a <= size_b { (a, mb) } else { (b, ma) };
-                let Some(tree) = &large.tree else {
-                    continue;
-                };
-                let near = segments[small]
-                    .points
-                    .iter()
-                    .map(|&i| tree.nearest_one(&positions[i as usize]).distance())
-                    .fold(f64::INFINITY, f64::min);
-                if near > gap {
-                    continue;
-                }
-                let union: Vec<u32> = segments[a]
-                    .points
-                    .iter()
-                    .chain(&segments[b].points)
-                    .copied()
-                    .collect();
-                let (shape, union_rough) = roughness(positions, &union);
-                let growth = union_rough / ma.rough.max(mb.rough).max(1e-300);
-                if growth <= PIECE_UNION_ROUGHNESS && shape.length() <= longest {
-                    candidates.push((growth, a, b));
+                if let Some(Some(growth)) = verdicts.get(&(a, b)) {
+                    candidates.push((*growth, a, b));
                 }
             }
         }
@@ -204,6 +248,7 @@ pub fn join_leaf_pieces(
         if !any {
             break;
         }
+        verdicts.retain(|&(a, b), _| !(touched[a] || touched[b]));
         for (s, segment) in segments.iter_mut().enumerate() {
             if touched[s] {
                 cache[s] = None;
@@ -343,6 +388,32 @@ mod tests {
         assert_eq!(joined.points.len(), n_left + n_right);
         for (s, segment) in segments.iter().enumerate() {
             assert_eq!(segment.id as usize, s);
+            for &i in &segment.points {
+                assert_eq!(point_segment[i as usize], Some(s as u32));
+            }
+        }
+    }
+
+    #[test]
+    fn a_leaf_in_three_pieces_becomes_one_over_two_rounds() {
+        // Bands 3 mm wide taken out at x = ±5 mm: three pieces, the outer two 13 mm apart.
+        // One round joins the middle piece to one side; the pair it leaves is judged again
+        // in the next round (the union changed), and the third piece joins it.
+        let points: Vec<Point3<f64>> = leaf(18.0, 8.0, [0.0, 0.0], 0.0, -5.0, 3.0, BEND)
+            .into_iter()
+            .filter(|p| (p.x * 1e3 - 5.0).abs() >= 1.5)
+            .collect();
+        let (left, rest): (Vec<_>, Vec<_>) = points.into_iter().partition(|p| p.x < -0.005);
+        let (right, middle): (Vec<_>, Vec<_>) = rest.into_iter().partition(|p| p.x > 0.005);
+        let total = left.len() + middle.len() + right.len();
+        let mut groups = typical_leaves();
+        groups.extend([left, middle, right]);
+        let (mut segments, mut point_segment, positions) = segments_of(&groups);
+        let joins = join_leaf_pieces(&mut segments, &mut point_segment, &positions, 1e-3);
+        assert_eq!(joins, 2);
+        assert_eq!(segments.len(), 3);
+        assert_eq!(segments[2].num_points, total);
+        for (s, segment) in segments.iter().enumerate() {
             for &i in &segment.points {
                 assert_eq!(point_segment[i as usize], Some(s as u32));
             }
