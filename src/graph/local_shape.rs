@@ -3,6 +3,7 @@
 //! is. Points on a leaf have flat neighbourhoods; points on a thin stem or petiole have
 //! neighbourhoods that wrap around it: thick and elongated.
 
+use nalgebra::Point3;
 use rayon::prelude::*;
 
 use super::neighbours::Neighbours;
@@ -42,10 +43,15 @@ impl Neighbourhoods {
     /// The `k` nearest neighbours of every point and the point itself; `None` where the points
     /// cannot be indexed (none at all, or more than a `u32` can number).
     pub fn of(points: &PointSet, k: usize) -> Option<Self> {
-        if u32::try_from(points.len()).is_err() {
+        Self::of_positions(&points.positions, k)
+    }
+
+    /// [`Neighbourhoods::of`] points given by their positions alone.
+    pub fn of_positions(positions: &[Point3<f64>], k: usize) -> Option<Self> {
+        if u32::try_from(positions.len()).is_err() {
             return None;
         }
-        let neighbours = Neighbours::new(points.positions.iter().copied()).ok()?;
+        let neighbours = Neighbours::new(positions.iter().copied()).ok()?;
         let per_point = (k + 1).min(neighbours.len()).max(1);
         let rows: Vec<Vec<u32>> = (0..neighbours.len())
             .into_par_iter()
@@ -85,16 +91,21 @@ impl Neighbourhoods {
     }
 
     /// The principal-component shape of point `i`'s neighbourhood of `k` neighbours.
-    fn shape(&self, points: &PointSet, i: usize, k: usize) -> Shape {
-        Shape::of(self.around(i, k).map(|j| points.positions[j]))
+    fn shape(&self, positions: &[Point3<f64>], i: usize, k: usize) -> Shape {
+        Shape::of(self.around(i, k).map(|j| positions[j]))
     }
 
     /// [`local_shapes`] of `points` (the points these neighbourhoods were searched among).
     pub fn shapes(&self, points: &PointSet, k: usize) -> Vec<LocalShape> {
+        self.shapes_at(&points.positions, k)
+    }
+
+    /// [`Neighbourhoods::shapes`] of the points at `positions`.
+    pub fn shapes_at(&self, positions: &[Point3<f64>], k: usize) -> Vec<LocalShape> {
         (0..self.len())
             .into_par_iter()
             .map(|i| {
-                let shape = self.shape(points, i, k);
+                let shape = self.shape(positions, i, k);
                 if shape.count < 4 {
                     return SHAPE_FALLBACK;
                 }
@@ -112,7 +123,21 @@ impl Neighbourhoods {
         (0..self.len())
             .into_par_iter()
             .map(|i| {
-                let shape = self.shape(points, i, k);
+                let shape = self.shape(&points.positions, i, k);
+                LocalPlane {
+                    normal: shape.normal(),
+                    rms: shape.eigenvalues[2].sqrt(),
+                }
+            })
+            .collect()
+    }
+
+    /// [`Neighbourhoods::planes`] of the points `which` alone, in that order.
+    pub fn planes_of(&self, points: &PointSet, which: &[usize], k: usize) -> Vec<LocalPlane> {
+        which
+            .par_iter()
+            .map(|&i| {
+                let shape = self.shape(&points.positions, i, k);
                 LocalPlane {
                     normal: shape.normal(),
                     rms: shape.eigenvalues[2].sqrt(),
@@ -454,6 +479,17 @@ mod tests {
             normal_coherence(&points, &normals, 20)
         );
         assert_eq!(shared.median_spacing(&points), median_spacing(&points));
+        // Some points' planes alone, in the order asked; the same search from positions alone.
+        let which = [599, 3, 640, 0, 3];
+        let all_planes = shared.planes(&points, 10);
+        let some: Vec<LocalPlane> = which.iter().map(|&i| all_planes[i]).collect();
+        assert_eq!(shared.planes_of(&points, &which, 10), some);
+        let from_positions = Neighbourhoods::of_positions(&points.positions, 20).unwrap();
+        assert_eq!(from_positions.indices, shared.indices);
+        assert_eq!(
+            from_positions.shapes_at(&points.positions, 8),
+            shared.shapes(&points, 8)
+        );
         // Fewer points than neighbours wanted: every list holds them all.
         let few = set(points.positions[..5].to_vec());
         let all = Neighbourhoods::of(&few, 20).unwrap();

@@ -17,7 +17,7 @@ use serde::Serialize;
 
 use super::components::Adjacency;
 use super::lanczos::{LanczosOptions, fiedler_vector};
-use super::neighbours::Neighbours;
+use super::local_shape::Neighbourhoods;
 use super::shape::Shape;
 use nalgebra::{Point3, Vector3};
 
@@ -200,7 +200,8 @@ pub fn judge_split(
 }
 
 /// The best two-way normalized cut of a group of points by their facing: a graph joins each
-/// point to its `neighbours` nearest, weighting each pair by how alike their `normals` face,
+/// point to its `neighbours` nearest (read from `around`, searched among `positions`),
+/// weighting each pair by how alike their `normals` face,
 /// `exp(−(1 − |nᵢ·nⱼ|) / facing_scale)`, so two leaves that touch at an angle are joined by weak
 /// edges along a short contact. Returns the lowest-Ncut sweep split with at least `min_side`
 /// points a side ([`best_sweep_split`]), or `None` when the group is too small or its graph
@@ -208,23 +209,25 @@ pub fn judge_split(
 pub fn facing_bisection(
     positions: &[Point3<f64>],
     normals: &[Vector3<f64>],
+    around: &Neighbourhoods,
     neighbours: usize,
     facing_scale: f64,
     min_side: usize,
 ) -> Option<Split> {
     let n = positions.len();
-    if n < 2 * min_side.max(1) || normals.len() != n || facing_scale <= 0.0 {
+    if n < 2 * min_side.max(1) || normals.len() != n || around.len() != n || facing_scale <= 0.0 {
         return None;
     }
-    let index = Neighbours::new(positions.iter().copied()).ok()?;
-    let mut pairs = std::collections::BTreeSet::new();
-    for a in 0..n {
-        for near in index.around(a, neighbours) {
-            if near.index != a {
-                pairs.insert((a.min(near.index) as u32, a.max(near.index) as u32));
-            }
-        }
-    }
+    let mut pairs: Vec<(u32, u32)> = (0..n)
+        .flat_map(|a| {
+            around
+                .around(a, neighbours)
+                .filter(move |&b| b != a)
+                .map(move |b| (a.min(b) as u32, a.max(b) as u32))
+        })
+        .collect();
+    pairs.sort_unstable();
+    pairs.dedup();
     let edges: Vec<(u32, u32, f64)> = pairs
         .into_iter()
         .map(|(a, b)| {
@@ -537,13 +540,24 @@ mod tests {
     fn a_fold_between_two_facings_is_cut_and_a_flat_sheet_costs_more_to_cut() {
         let (positions, normals, first) = folded_patches(10, 50f64.to_radians());
         let facing_scale = 0.1;
-        let folded = facing_bisection(&positions, &normals, 8, facing_scale, 20).unwrap();
+        let around =
+            |positions: &[Point3<f64>]| Neighbourhoods::of_positions(positions, 8).unwrap();
+        let folded = facing_bisection(
+            &positions,
+            &normals,
+            &around(&positions),
+            8,
+            facing_scale,
+            20,
+        )
+        .unwrap();
         let side_of_first = folded.side[0];
         for (i, side) in folded.side.iter().enumerate() {
             assert_eq!(*side == side_of_first, i < first, "point {i}");
         }
         let (flat, flat_normals, _) = folded_patches(10, 0.0);
-        let whole = facing_bisection(&flat, &flat_normals, 8, facing_scale, 20).unwrap();
+        let whole =
+            facing_bisection(&flat, &flat_normals, &around(&flat), 8, facing_scale, 20).unwrap();
         assert!(
             folded.ncut < 0.25 * whole.ncut,
             "folded {:.4} flat {:.4}",
@@ -551,7 +565,12 @@ mod tests {
             whole.ncut
         );
         // Too few points for two sides of 20.
-        assert!(facing_bisection(&positions[..39], &normals[..39], 8, facing_scale, 20).is_none());
+        let few = &positions[..39];
+        assert!(facing_bisection(few, &normals[..39], &around(few), 8, facing_scale, 20).is_none());
+        // Neighbourhoods of other points than these are refused.
+        assert!(
+            facing_bisection(&positions, &normals, &around(few), 8, facing_scale, 20).is_none()
+        );
     }
 
     #[test]

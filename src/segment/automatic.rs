@@ -1193,12 +1193,6 @@ impl LeafParts<'_> {
         };
         let facing_scale = TOUCHING_LEAVES_FACING_SCALE * (1.0 - judge.flat_facing).max(1e-3);
         let min_side = options.ncut.min_segment_points;
-        let normals_of = |members: &[usize]| -> Vec<nalgebra::Vector3<f64>> {
-            local_shape::local_shapes(&points.subset(members), SHEET_SHAPE_NEIGHBOURS)
-                .iter()
-                .map(|shape| shape.normal)
-                .collect()
-        };
         let mut queue: Vec<usize> = (0..self.segments.len())
             .rev()
             .filter(|&s| {
@@ -1214,11 +1208,20 @@ impl LeafParts<'_> {
             let members: Vec<usize> = segment.points.iter().map(|&p| p as usize).collect();
             ((members.len() as f64) >= min_points).then_some(members)
         };
+        // One neighbour search gives the points' normals and the bisection's graph.
         let bisect = |members: &[usize]| {
             let positions: Vec<Point3<f64>> = members.iter().map(|&i| self.positions[i]).collect();
+            let around =
+                local_shape::Neighbourhoods::of_positions(&positions, SHEET_SHAPE_NEIGHBOURS)?;
+            let normals: Vec<nalgebra::Vector3<f64>> = around
+                .shapes_at(&positions, SHEET_SHAPE_NEIGHBOURS)
+                .iter()
+                .map(|shape| shape.normal)
+                .collect();
             crate::graph::ncut::facing_bisection(
                 &positions,
-                &normals_of(members),
+                &normals,
+                &around,
                 SHEET_SHAPE_NEIGHBOURS,
                 facing_scale,
                 min_side,
@@ -1440,21 +1443,36 @@ impl LeafParts<'_> {
             return 0;
         };
         let shapes = around.shapes(&left_points, SHEET_SHAPE_NEIGHBOURS);
-        let sheet_points: Vec<usize> = on_sheets(&shapes, min_elongation, max_thickness)
-            .into_iter()
-            .map(|k| left[k])
-            .collect();
+        let on_sheet = on_sheets(&shapes, min_elongation, max_thickness);
+        let sheet_points: Vec<usize> = on_sheet.iter().map(|&k| left[k]).collect();
         if sheet_points.len() < options.ncut.min_segment_points {
             return 0;
         }
-        let planes = around.planes(&left_points, PLANE_NEIGHBOURS);
-        let noise_of: std::collections::HashMap<usize, f64> = left
-            .iter()
-            .zip(&planes)
-            .map(|(&i, plane)| (i, plane.rms))
-            .collect();
+        // The points' noise (local plane RMS) is read only for the points of the groups
+        // found: measured for the sheet points the groups grow from, then for their rims.
+        let noise_at = |which: &[usize]| -> Vec<(usize, f64)> {
+            let local: Vec<usize> = which
+                .iter()
+                .filter_map(|i| left.binary_search(i).ok())
+                .collect();
+            let planes = around.planes_of(&left_points, &local, PLANE_NEIGHBOURS);
+            local
+                .iter()
+                .zip(planes)
+                .map(|(&k, plane)| (left[k], plane.rms))
+                .collect()
+        };
+        let mut noise_of: std::collections::HashMap<usize, f64> =
+            noise_at(&sheet_points).into_iter().collect();
         let groups =
             self.sheet_groups_with_rims(&sheet_points, &candidate, &noise_of, &options.borders);
+        let rims: std::collections::BTreeSet<usize> = groups
+            .iter()
+            .flat_map(|(first, second)| first.iter().chain(second))
+            .copied()
+            .filter(|i| !noise_of.contains_key(i))
+            .collect();
+        noise_of.extend(noise_at(&rims.into_iter().collect::<Vec<_>>()));
         let Some(judge) = self.found_leaf_judge(plane_rms, min_points, heights, &options.ncut)
         else {
             return 0;
