@@ -1450,12 +1450,9 @@ impl LeafParts<'_> {
         }
         // The points' noise (local plane RMS) is read only for the points of the groups
         // found: measured for the sheet points the groups grow from, then for their rims.
-        let noise_at = |which: &[usize]| -> Vec<(usize, f64)> {
-            let local: Vec<usize> = which
-                .iter()
-                .filter_map(|i| left.binary_search(i).ok())
-                .collect();
-            let planes = around.planes_of(&left_points, &local, PLANE_NEIGHBOURS);
+        // `local` indexes `left`.
+        let noise_at = |local: &[usize]| -> Vec<(usize, f64)> {
+            let planes = around.planes_of(&left_points, local, PLANE_NEIGHBOURS);
             local
                 .iter()
                 .zip(planes)
@@ -1463,14 +1460,14 @@ impl LeafParts<'_> {
                 .collect()
         };
         let mut noise_of: std::collections::HashMap<usize, f64> =
-            noise_at(&sheet_points).into_iter().collect();
+            noise_at(&on_sheet).into_iter().collect();
         let groups =
             self.sheet_groups_with_rims(&sheet_points, &candidate, &noise_of, &options.borders);
         let rims: std::collections::BTreeSet<usize> = groups
             .iter()
             .flat_map(|(first, second)| first.iter().chain(second))
-            .copied()
             .filter(|i| !noise_of.contains_key(i))
+            .filter_map(|i| left.binary_search(i).ok())
             .collect();
         noise_of.extend(noise_at(&rims.into_iter().collect::<Vec<_>>()));
         let Some(judge) = self.found_leaf_judge(plane_rms, min_points, heights, &options.ncut)

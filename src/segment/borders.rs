@@ -210,11 +210,13 @@ pub fn reclaim_borders(
             .map(|i| &positions[i]),
         link.max(reach) * (1.0 + 1e-6),
     );
-    let candidates: Vec<usize> = (0..positions.len())
-        .filter(|&i| candidate[i] && leaf_of[i].is_none() && near_leaves.holds(&positions[i]))
-        .collect();
     let involved: Vec<usize> = (0..positions.len())
         .filter(|&i| leaf_of[i].is_some() || (candidate[i] && near_leaves.holds(&positions[i])))
+        .collect();
+    let candidates: Vec<usize> = involved
+        .iter()
+        .copied()
+        .filter(|&i| leaf_of[i].is_none())
         .collect();
     let Ok(index) = Neighbours::new(involved.iter().map(|&i| positions[i])) else {
         return Vec::new();
