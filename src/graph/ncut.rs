@@ -333,6 +333,13 @@ pub fn two_sheet_split(
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct NcutStats {
     pub eigen_solves: usize,
+    /// The points of every group an eigenproblem was solved on, added up: what the recursion's
+    /// course costs (a solve of `n` points costs about `n` times the Lanczos iterations
+    /// squared). Cutting leaves one by one off the stem that holds them solves that group once
+    /// per leaf.
+    pub solved_points: usize,
+    /// The largest group an eigenproblem was solved on (points).
+    pub largest_solved: usize,
     pub splits_boundary: usize,
     pub splits_bottleneck: usize,
     pub splits_shape: usize,
@@ -364,15 +371,15 @@ struct Recursion<'a> {
 impl Recursion<'_> {
     /// One step on one group: a pure function of the group (its members and their order), so
     /// the steps may run in any order and on any thread.
-    /// Returns the step and whether it solved an eigenproblem.
-    fn step(&self, group: Vec<u32>) -> (Step, bool) {
+    /// Returns the step and the number of points it solved an eigenproblem on (0: none).
+    fn step(&self, group: Vec<u32>) -> (Step, usize) {
         let options = self.options;
         let unsplit = |group| Step::Final {
             group,
             rejected: false,
         };
         if group.len() < 2 * options.min_segment_points {
-            return (unsplit(group), false);
+            return (unsplit(group), 0);
         }
         let sub = self.adjacency.induced(&group);
         // A group may have fallen apart after a split: handle each piece on its own.
@@ -383,13 +390,14 @@ impl Recursion<'_> {
                 .into_iter()
                 .map(|piece| piece.iter().map(|&i| group[i as usize]).collect())
                 .collect();
-            return (Step::Pieces(pieces), false);
+            return (Step::Pieces(pieces), 0);
         }
+        let solved = group.len();
         let Some((_, fiedler)) = fiedler_vector(&sub, &self.lanczos) else {
-            return (unsplit(group), true);
+            return (unsplit(group), solved);
         };
         let Some(split) = best_sweep_split(&sub, &fiedler, options.min_segment_points) else {
-            return (unsplit(group), true);
+            return (unsplit(group), solved);
         };
         let local_positions: Vec<Point3<f64>> =
             group.iter().map(|&g| self.positions[g as usize]).collect();
@@ -418,7 +426,7 @@ impl Recursion<'_> {
                 rejected: true,
             },
         };
-        (step, true)
+        (step, solved)
     }
 }
 
@@ -442,7 +450,9 @@ fn split_in_scope<'s>(
         // A poisoned lock only means another step panicked; its panic is re-raised by the
         // scope, so the tally here may go on.
         let mut finished = finished.lock().unwrap_or_else(PoisonError::into_inner);
-        finished.stats.eigen_solves += usize::from(solved);
+        finished.stats.eigen_solves += usize::from(solved > 0);
+        finished.stats.solved_points += solved;
+        finished.stats.largest_solved = finished.stats.largest_solved.max(solved);
         match step {
             Step::Final { group, rejected } => {
                 finished.stats.rejected_splits += usize::from(rejected);
@@ -586,6 +596,10 @@ mod tests {
         );
         assert_eq!(groups.len(), 2, "{stats:?}");
         assert_eq!(stats.splits_boundary, 1);
+        // The whole (288 points) was solved, then each side (144) to find it is one patch.
+        assert_eq!(stats.eigen_solves, 3, "{stats:?}");
+        assert_eq!(stats.solved_points, 288 + 2 * 144);
+        assert_eq!(stats.largest_solved, 288);
         for g in &groups {
             assert_eq!(g.len(), 144);
             let first = positions[g[0] as usize].x < 12.0;

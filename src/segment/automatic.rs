@@ -1638,7 +1638,13 @@ pub fn segment_scene(
         &graph.plane_rms,
         &options.ncut,
     );
-    tracing::debug!(seconds = phase.elapsed().as_secs_f64(), "normalized cuts");
+    tracing::debug!(
+        seconds = phase.elapsed().as_secs_f64(),
+        eigen_solves = ncut_stats.eigen_solves,
+        solved_points = ncut_stats.solved_points,
+        largest_solved = ncut_stats.largest_solved,
+        "normalized cuts"
+    );
     // The plant's heights, for pot detection.
     let heights = PlantHeights::of(&plant_points.positions, &foreground);
 
