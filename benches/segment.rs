@@ -121,6 +121,19 @@ fn segmentation_500k(c: &mut Criterion) {
     let scene = medium_plant(dir.path(), 21, 600_000);
     let points = PointSet::from_scene(&scene);
     eprintln!("{} points", points.len());
+    // The normalized cuts' course (how many points their eigen solves work on) moves with
+    // rounding-level changes of the rendered plant, and their time with it: printed, so that a
+    // ratio that changes between machines or commits can be traced to the course.
+    match segment_scene(&scene, &SegmentOptions::default(), &NoProgress) {
+        Ok(once) => eprintln!(
+            "{} segments; normalized cuts: {} eigen solves over {} points, the largest {}",
+            once.segments.len(),
+            once.ncut.eigen_solves,
+            once.ncut.solved_points,
+            once.ncut.largest_solved
+        ),
+        Err(error) => eprintln!("segmentation failed: {error}"),
+    }
     let mut group = c.benchmark_group("segmentation_500k_points_36_views");
     group.sample_size(10);
     group.bench_function("baseline_knn_pairs_k3", |b| {
