@@ -79,6 +79,7 @@ fn segmentation_rows_join_a_dense_workspace_by_point_id() {
         views: Vec::new(),
         support: Vec::new(),
         thin_organ: Vec::new(),
+        gap_fill: Vec::new(),
     };
     for point in model.points() {
         let mut views: Vec<u32> = point

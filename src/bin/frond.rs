@@ -756,6 +756,11 @@ struct DensifyArgs {
     /// leaf rims that the skeleton draws as branches (see the README's "Two stereo partners").
     #[arg(long, default_value_t = 1)]
     partners: usize,
+    /// Further stereo partners per view whose depth maps only fill the gaps the main
+    /// partners' points leave (weakly textured leaves); the skeleton leaves those points out
+    /// (see the README's "Gap fills").
+    #[arg(long, default_value_t = 0)]
+    fill_partners: usize,
     /// Other depth maps that must agree with a depth for it to be kept.
     #[arg(long, default_value_t = 4)]
     min_consistent: usize,
@@ -805,6 +810,7 @@ impl DensifyArgs {
             ..Default::default()
         };
         options.pairs.partners_per_view = self.partners;
+        options.pairs.fill_partners_per_view = self.fill_partners;
         if self.block_size < 1 || self.block_size > 21 || self.block_size % 2 == 0 {
             bail!("--block-size must be odd, 1 to 21");
         }

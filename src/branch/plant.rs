@@ -32,7 +32,8 @@ use crate::segment::{Labels, SegmentLabel, Segmentation};
 /// 11–13: mean skeleton length precision 0.676 → 0.712 (higher on 6 of 8), petiole recall
 /// 0.772 → 0.775; medium seeds 3–5: branch recall 0.343 → 0.339. Leaving those rim points in
 /// the tube test's ball as sheet as well raised precision to 0.749 but lost petiole recall
-/// (0.747).
+/// (0.747). Points that only fill gaps of the main stereo points ([`PointSet::gap_fill`])
+/// never are: a second stereo partner puts bands of them along leaf rims.
 pub fn skeleton_point_indices(
     points: &PointSet,
     foreground: &Foreground,
@@ -40,6 +41,7 @@ pub fn skeleton_point_indices(
 ) -> Vec<u32> {
     let rims_known = !points.thin_organ.is_empty();
     (0..labels.segment_of.len())
+        .filter(|&i| !points.is_gap_fill(i))
         .filter(|&i| match labels.label_of_point(i) {
             Some(SegmentLabel::Stem | SegmentLabel::Other) => true,
             Some(SegmentLabel::Leaf) => {

@@ -280,6 +280,7 @@ fn simulated_sheet(spacing: f64, sigma: f64) -> PointSet {
         point_ids: (0..n as u64).collect(),
         id_kind: Default::default(),
         thin_organ: Vec::new(),
+        gap_fill: Vec::new(),
     }
 }
 
@@ -371,6 +372,7 @@ mod tests {
             point_ids: (0..n as u64).collect(),
             id_kind: Default::default(),
             thin_organ: Vec::new(),
+            gap_fill: Vec::new(),
         }
     }
 

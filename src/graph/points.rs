@@ -28,12 +28,22 @@ pub struct PointSet {
     /// Per point: whether `frond densify`'s thin-organ sweep found it (empty when the input
     /// does not say: sparse points, COLMAP's dense points).
     pub thin_organ: Vec<bool>,
+    /// Per point: whether it fills a gap of the main stereo partners' points (`frond
+    /// densify`'s fill partners): leaves use these points, the skeleton does not (empty when
+    /// the input does not say).
+    pub gap_fill: Vec<bool>,
 }
 
 impl PointSet {
     /// Whether point `i` was found by the thin-organ sweep (false when the input does not say).
     pub fn is_thin_organ(&self, i: usize) -> bool {
         self.thin_organ.get(i).copied().unwrap_or(false)
+    }
+
+    /// Whether point `i` fills a gap of the main stereo points (false when the input does not
+    /// say).
+    pub fn is_gap_fill(&self, i: usize) -> bool {
+        self.gap_fill.get(i).copied().unwrap_or(false)
     }
 
     pub fn len(&self) -> usize {
@@ -88,6 +98,9 @@ impl PointSet {
         if dense.thin_organ.len() == set.positions.len() {
             set.thin_organ.clone_from(&dense.thin_organ);
         }
+        if dense.gap_fill.len() == set.positions.len() && dense.gap_fill.iter().any(|&f| f) {
+            set.gap_fill.clone_from(&dense.gap_fill);
+        }
         set.id_kind = PointIds::FusedRow;
         if fused_rows_are_model_points(&set.positions, model) {
             set.id_kind = PointIds::ModelPoint3D;
@@ -96,6 +109,30 @@ impl PointSet {
             }
         }
         set
+    }
+
+    /// The points that are not gap fills, and the gap fills (each in order); neither says
+    /// which points are gap fills any more.
+    pub fn split_gap_fills(self) -> (Self, Self) {
+        if !self.gap_fill.iter().any(|&f| f) {
+            let none = Self {
+                id_kind: self.id_kind,
+                ..Self::default()
+            };
+            return (
+                Self {
+                    gap_fill: Vec::new(),
+                    ..self
+                },
+                none,
+            );
+        }
+        let (fills, main): (Vec<usize>, Vec<usize>) =
+            (0..self.len()).partition(|&i| self.is_gap_fill(i));
+        let (mut main, mut fills) = (self.subset(&main), self.subset(&fills));
+        main.gap_fill.clear();
+        fills.gap_fill.clear();
+        (main, fills)
     }
 
     /// A subset in the given order (ids keep their kind).
@@ -110,6 +147,11 @@ impl PointSet {
                 Vec::new()
             } else {
                 indices.iter().map(|&i| self.is_thin_organ(i)).collect()
+            },
+            gap_fill: if self.gap_fill.is_empty() {
+                Vec::new()
+            } else {
+                indices.iter().map(|&i| self.is_gap_fill(i)).collect()
             },
         }
     }

@@ -10,6 +10,7 @@
 
 pub mod extent;
 pub mod fit;
+pub mod gap_fill;
 pub mod template;
 
 use std::collections::{BTreeMap, HashMap};

@@ -100,9 +100,17 @@ pub struct FusedPoints {
     pub views: Vec<Vec<u32>>,
     pub support: Vec<u32>,
     pub thin_organ: Vec<bool>,
+    /// Per point: whether it fills a gap the main partners' points left, from the depth maps
+    /// of fill partners ([`super::densify`]); empty when none were asked for.
+    pub gap_fill: Vec<bool>,
 }
 
 impl FusedPoints {
+    /// Whether point `k` fills a gap (false when the points do not say).
+    pub fn is_gap_fill(&self, k: usize) -> bool {
+        self.gap_fill.get(k).copied().unwrap_or(false)
+    }
+
     pub fn len(&self) -> usize {
         self.positions_world.len()
     }

@@ -9,7 +9,8 @@
 //! with and merges them on a voxel grid. The result is written as a dense workspace that
 //! `frond reconstruct` reads: `sparse/` (cameras, poses and the fused points with tracks),
 //! `images/`, `fused.ply` + `fused.ply.vis` (COLMAP's formats; `fused.ply` also says which
-//! points the thin-organ sweep found, `thin_organ`) and `densify.json`.
+//! points the thin-organ sweep found, `thin_organ`, and which fill gaps from the fill
+//! partners' depth maps, `gap_fill`) and `densify.json`.
 //!
 //! Takes a [`Scene`](crate::scene::Scene) with a sparse model and its photos; returns
 //! [`FusedPoints`] and a [`DensifyReport`], and writes the dense workspace.
@@ -121,6 +122,10 @@ pub struct DensifyReport {
     pub fusion: FusionStats,
     /// The thin-organ sweep, when it ran (its points are in the output, after the fused ones).
     pub thin: Option<ThinStats>,
+    /// Depth maps of fill partners (0: none were asked for).
+    pub fill_maps: usize,
+    /// Points added where the main maps left gaps ([`FusedPoints::gap_fill`]).
+    pub gap_fill_points: usize,
     pub mean_views_per_point: f64,
     pub timings: BTreeMap<String, f64>,
 }
@@ -162,12 +167,32 @@ fn sparse_disparities(
 
 /// Computes one depth map per stereo pair and fuses them (see the module docs).
 /// Deterministic for given inputs and options.
+///
+/// With fill partners ([`PairOptions::fill_partners_per_view`]) the main partners' maps are
+/// fused alone first, exactly as without them (same points, same thin-organ sweep), and then
+/// all maps together; a point of the second fusion is added, marked as a gap fill
+/// ([`FusedPoints::gap_fill`]), only where the first left the surface bare (fewer than
+/// [`MAX_MAIN_AROUND`] main points within two voxels). Measured (README: *Gap fills from a
+/// second partner*): a second partner covers weakly textured leaves that one misses, and also
+/// adds bands of points along leaf rims that the skeleton would follow, which is why the
+/// skeleton leaves gap fills out.
 pub fn densify(
     scene: &Scene,
     options: &DensifyOptions,
     progress: &dyn Progress,
 ) -> Result<(FusedPoints, DensifyReport), MvsError> {
     let (maps, loaded, mut report) = depth_maps_and_views(scene, options, progress)?;
+    let (maps, fill_maps) = if options.pairs.fill_partners_per_view > 0 {
+        let main: std::collections::HashSet<(usize, usize)> =
+            pairs::select_pairs(&scene.reconstruction, &options.pairs)
+                .iter()
+                .map(|p| (p.left, p.right))
+                .collect();
+        maps.into_iter()
+            .partition(|m| main.contains(&(m.pair.left, m.pair.right)))
+    } else {
+        (maps, Vec::new())
+    };
     let started = Instant::now();
     let (mut fused, stats) = fusion::fuse(
         &maps,
@@ -202,12 +227,67 @@ pub fn densify(
             .timings
             .insert("thin".to_owned(), started.elapsed().as_secs_f64());
     }
+    if !fill_maps.is_empty() {
+        let started = Instant::now();
+        report.fill_maps = fill_maps.len();
+        let mut all = maps;
+        all.extend(fill_maps);
+        let (all_fused, _) = fusion::fuse(
+            &all,
+            &options.fusion,
+            report.region_of_interest.as_ref(),
+            progress,
+        );
+        let fills = where_main_is_sparse(all_fused, &fused, voxel);
+        report.gap_fill_points = fills.len();
+        fused.gap_fill = vec![false; fused.len()];
+        fused
+            .gap_fill
+            .extend(std::iter::repeat_n(true, fills.len()));
+        fused.positions_world.extend(fills.positions_world);
+        fused.colors.extend(fills.colors);
+        fused.views.extend(fills.views);
+        fused.support.extend(fills.support);
+        fused.thin_organ.extend(fills.thin_organ);
+        report
+            .timings
+            .insert("fill".to_owned(), started.elapsed().as_secs_f64());
+    }
     report.mean_views_per_point = if fused.is_empty() {
         0.0
     } else {
         fused.views.iter().map(Vec::len).sum::<usize>() as f64 / fused.len() as f64
     };
     Ok((fused, report))
+}
+
+/// A surface patch the main maps sampled has about π·2² ≈ 12 of their points within two
+/// voxels of any point on it (as for [`thin::where_stereo_is_sparse`]); a point of all maps'
+/// fusion with fewer than this many main points there fills a gap.
+pub const MAX_MAIN_AROUND: usize = 4;
+
+/// The points of `all` that lie where `main` is sparse (see [`MAX_MAIN_AROUND`]), in order.
+fn where_main_is_sparse(all: FusedPoints, main: &FusedPoints, voxel: f64) -> FusedPoints {
+    let keep: Vec<bool> =
+        match crate::graph::neighbours::Neighbours::new(main.positions_world.iter().copied()) {
+            Ok(index) => all
+                .positions_world
+                .par_iter()
+                .map(|p| index.within_radius_unsorted(p, 2.0 * voxel).len() < MAX_MAIN_AROUND)
+                .collect(),
+            Err(_) => vec![true; all.len()],
+        };
+    let mut out = FusedPoints::default();
+    for (k, keep) in keep.into_iter().enumerate() {
+        if keep {
+            out.positions_world.push(all.positions_world[k]);
+            out.colors.push(all.colors[k]);
+            out.views.push(all.views[k].clone());
+            out.support.push(all.support[k]);
+            out.thin_organ.push(false);
+        }
+    }
+    out
 }
 
 /// The stereo half of [`densify`]: view pairs, region of interest, and one depth map per
@@ -263,7 +343,14 @@ fn depth_maps_and_views(
         options.roi_radius,
     );
     report.region_of_interest = roi;
-    let pairs = pairs::select_pairs(model, &options.pairs);
+    let pairs = pairs::select_pairs(
+        model,
+        &PairOptions {
+            partners_per_view: options.pairs.partners_per_view
+                + options.pairs.fill_partners_per_view,
+            ..options.pairs
+        },
+    );
     if pairs.is_empty() {
         return Err(MvsError::NoPairs {
             min_shared: options.pairs.min_shared_points,
@@ -426,6 +513,9 @@ pub struct DenseModel {
     /// Per point of `model`: whether the thin-organ sweep found it (`fused.ply`'s
     /// `thin_organ`).
     pub thin_organ: Vec<bool>,
+    /// Per point of `model`: whether it fills a gap of the main partners' points
+    /// ([`FusedPoints::gap_fill`], `fused.ply`'s `gap_fill`).
+    pub gap_fill: Vec<bool>,
 }
 
 /// The fused points as a COLMAP model: the scene's cameras and poses, one keypoint per
@@ -443,6 +533,7 @@ pub fn dense_model(model: &Reconstruction, fused: &FusedPoints) -> Result<DenseM
     let mut points = Vec::with_capacity(fused.len());
     let mut visibility = Vec::with_capacity(fused.len());
     let mut thin_organ = Vec::with_capacity(fused.len());
+    let mut gap_fill = Vec::with_capacity(fused.len());
     for (k, position) in fused.positions_world.iter().enumerate() {
         let observations: Vec<(u32, nalgebra::Point2<f64>)> = fused.views[k]
             .iter()
@@ -471,6 +562,7 @@ pub fn dense_model(model: &Reconstruction, fused: &FusedPoints) -> Result<DenseM
         }
         visibility.push(observations.iter().map(|(v, _)| *v).collect());
         thin_organ.push(fused.thin_organ.get(k).copied().unwrap_or(false));
+        gap_fill.push(fused.is_gap_fill(k));
         points.push(Point3D {
             id,
             position_world: *position,
@@ -491,12 +583,19 @@ pub fn dense_model(model: &Reconstruction, fused: &FusedPoints) -> Result<DenseM
         model: dense,
         visibility,
         thin_organ,
+        gap_fill,
     })
 }
 
-/// `fused.ply`: binary PLY with float positions, 8-bit colours and `thin_organ` (1: found by
-/// the thin-organ sweep, see [`DenseModel::thin_organ`]).
-fn fused_ply(model: &Reconstruction, thin_organ: &[bool]) -> Vec<u8> {
+/// `fused.ply`: binary PLY with float positions, 8-bit colours, `thin_organ` (1: found by
+/// the thin-organ sweep, see [`DenseModel::thin_organ`]) and `gap_fill` (1: a fill partner's
+/// point, see [`DenseModel::gap_fill`]).
+fn fused_ply(model: &Reconstruction, thin_organ: &[bool], gap_fill: &[bool]) -> Vec<u8> {
+    let flag = |flags: &[bool]| -> Vec<f64> {
+        (0..model.points().len())
+            .map(|k| f64::from(u8::from(flags.get(k).copied().unwrap_or(false))))
+            .collect()
+    };
     let points = model.points();
     let coordinate =
         |axis: usize| -> Vec<f64> { points.iter().map(|p| p.position_world[axis]).collect() };
@@ -512,13 +611,8 @@ fn fused_ply(model: &Reconstruction, thin_organ: &[bool]) -> Vec<u8> {
                 Column::scalar("red", ScalarType::U8, channel(0)),
                 Column::scalar("green", ScalarType::U8, channel(1)),
                 Column::scalar("blue", ScalarType::U8, channel(2)),
-                Column::scalar(
-                    "thin_organ",
-                    ScalarType::U8,
-                    (0..points.len())
-                        .map(|k| f64::from(u8::from(thin_organ.get(k).copied().unwrap_or(false))))
-                        .collect(),
-                ),
+                Column::scalar("thin_organ", ScalarType::U8, flag(thin_organ)),
+                Column::scalar("gap_fill", ScalarType::U8, flag(gap_fill)),
             ],
         }],
         comments: vec!["frond densify: semi-dense points fused from pairwise stereo".to_owned()],
@@ -572,6 +666,7 @@ pub fn write_workspace(
         model: dense,
         visibility,
         thin_organ,
+        gap_fill,
     } = dense_model(&scene.reconstruction, fused)?;
     let staging = StagedDir::new(out).map_err(|e| output_error(out, e))?;
     let root = staging.path();
@@ -580,7 +675,7 @@ pub fn write_workspace(
     write_model(&sparse, &dense, ModelFormat::Binary)?;
     link_images(scene, &root.join("images"))?;
     let ply_path = root.join("fused.ply");
-    write_atomic(&ply_path, &fused_ply(&dense, &thin_organ))
+    write_atomic(&ply_path, &fused_ply(&dense, &thin_organ, &gap_fill))
         .map_err(|e| output_error(&ply_path, e))?;
     let vis_path = root.join("fused.ply.vis");
     write_atomic(&vis_path, &fused_visibility(&visibility))

@@ -44,7 +44,8 @@ pub struct PointDensity {
 
 /// Measures the scene's point spacing (see the module docs).
 pub fn point_density(scene: &Scene) -> PointDensity {
-    let points = PointSet::from_scene(scene);
+    // The points the segmentation works on (gap fills are the leaf stage's).
+    let (points, _) = PointSet::from_scene(scene).split_gap_fills();
     let spacing_footprints = median_spacing_footprints(scene, &points);
     PointDensity {
         points: points.len(),

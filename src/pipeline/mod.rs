@@ -32,7 +32,7 @@ use crate::branch::plant::{
 use crate::branch::skeleton::SkeletonStats;
 use crate::leaf::{
     Boundaries, LeafError, LeafInput, LeafOptions, LeafReconstruction, LeafTimings, PlantContext,
-    SkippedLeaf, UnusableView, reconstruct_leaves,
+    SkippedLeaf, UnusableView, gap_fill, reconstruct_leaves,
 };
 use crate::model::{CompoundGroup, ModelLeaf, PlantModel};
 use crate::scene::{Scene, SceneError};
@@ -394,10 +394,29 @@ pub fn fit_leaves(
     progress: &dyn Progress,
 ) -> Result<LeafReconstruction, LeafError> {
     let plant = state.plant_context();
+    let fills = &state.segmentation.gap_fills;
+    let extended;
+    let (points, labels) = if fills.is_empty() {
+        (&state.segmentation.points, state.labels)
+    } else {
+        extended = gap_fill::with_gap_fills(
+            &state.segmentation.points,
+            state.labels,
+            &state.segmentation.foreground.class,
+            fills,
+        );
+        let n = state.segmentation.points.len();
+        let on_leaves = extended.1.segment_of[n..]
+            .iter()
+            .filter(|&&s| s >= 0)
+            .count();
+        tracing::info!("gap fills: {on_leaves} of {} on leaf segments", fills.len());
+        (&extended.0, &extended.1)
+    };
     let input = LeafInput {
         scene: state.scene,
-        points: &state.segmentation.points,
-        labels: state.labels,
+        points,
+        labels,
         plant: &plant,
         views: state.views,
     };

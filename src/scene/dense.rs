@@ -1,8 +1,9 @@
 //! COLMAP's fused dense point cloud: `fused.ply` (positions, normals, colours) and its
 //! visibility file `fused.ply.vis` (for each point, the images that see it, as positions in
 //! the dense workspace's image list, which is the file order of its sparse model). `frond
-//! densify` adds a vertex property `thin_organ` (1: a point its thin-organ sweep found on a
-//! stem's or petiole's centreline); COLMAP's files have none.
+//! densify` adds the vertex properties `thin_organ` (1: a point its thin-organ sweep found on
+//! a stem's or petiole's centreline) and `gap_fill` (1: a point of its fill partners' depth
+//! maps where the main partners' left a gap); COLMAP's files have neither.
 
 use std::path::Path;
 
@@ -23,6 +24,9 @@ pub struct DensePoints {
     /// For each point, whether `frond densify`'s thin-organ sweep found it (empty when the
     /// file has no `thin_organ` property).
     pub thin_organ: Vec<bool>,
+    /// For each point, whether it fills a gap of the main stereo partners' points, from
+    /// `frond densify`'s fill partners (empty when the file has no `gap_fill` property).
+    pub gap_fill: Vec<bool>,
 }
 
 fn column<'a>(vertex: &'a Element, name: &str, path: &Path) -> SceneResult<&'a [f64]> {
@@ -99,10 +103,13 @@ pub fn read_fused(ply_path: &Path, model: &Reconstruction) -> SceneResult<DenseP
             .collect(),
         _ => vec![[200, 200, 200]; vertex.count],
     };
-    let thin_organ = vertex
-        .column("thin_organ")
-        .map(|c| c.values.iter().map(|&v| v > 0.0).collect())
-        .unwrap_or_default();
+    let flag = |name: &str| -> Vec<bool> {
+        vertex
+            .column(name)
+            .map(|c| c.values.iter().map(|&v| v > 0.0).collect())
+            .unwrap_or_default()
+    };
+    let (thin_organ, gap_fill) = (flag("thin_organ"), flag("gap_fill"));
     let vis_path = ply_path.with_file_name(format!(
         "{}.vis",
         ply_path
@@ -122,6 +129,7 @@ pub fn read_fused(ply_path: &Path, model: &Reconstruction) -> SceneResult<DenseP
         colors,
         visible_in,
         thin_organ,
+        gap_fill,
     })
 }
 

@@ -131,6 +131,10 @@ pub struct Segmentation {
     /// Graph node → index in `points`.
     #[serde(skip)]
     pub graph_points: Vec<usize>,
+    /// The input's gap fills ([`PointSet::gap_fill`]), left out of `points` and every step
+    /// here; the leaf stage labels them from the segments ([`crate::leaf::gap_fill`]).
+    #[serde(skip)]
+    pub gap_fills: PointSet,
 }
 
 impl Segmentation {
@@ -1556,7 +1560,7 @@ pub fn segment_scene(
 ) -> Result<Segmentation, SegmentError> {
     let start = Instant::now();
     let mut timings = SegmentTimings::default();
-    let points = PointSet::from_scene(scene);
+    let (points, gap_fills) = PointSet::from_scene(scene).split_gap_fills();
     if points.is_empty() {
         return Err(ForegroundError::NoPoints.into());
     }
@@ -1832,6 +1836,7 @@ pub fn segment_scene(
         options: *options,
         graph,
         graph_points: plant,
+        gap_fills,
     })
 }
 
@@ -1990,6 +1995,7 @@ mod tests {
             point_ids: (0..n as u64).collect(),
             id_kind: PointIds::default(),
             thin_organ: Vec::new(),
+            gap_fill: Vec::new(),
         }
     }
 
@@ -2409,6 +2415,7 @@ mod tests {
             point_ids: (0..n as u64).collect(),
             id_kind: PointIds::default(),
             thin_organ: Vec::new(),
+            gap_fill: Vec::new(),
         };
         let options = SegmentOptions::default();
         let (relabelled, segments, _) =

@@ -1,7 +1,9 @@
 //! Per-view data the image-space steps share (seed 004 §5.3–5.4): the projection of every
 //! point a view sees, and the view's watershed superpixels. Both depend only on the scene and
 //! the points, never on the labels, so one [`ViewCache`] serves every edit of a session and
-//! every leaf boundary. Takes a scene, its point set and the current labels; returns
+//! every leaf boundary. Projections are cached per view and point count: a session passes two
+//! point sets, the segmentation's and, in the leaf stage, the same points followed by the
+//! gap fills ([`crate::leaf::gap_fill`]). Takes a scene, its point set and the current labels; returns
 //! projections, superpixels and segment boundaries (computed on demand, cached, callable from
 //! many threads at once).
 
@@ -28,7 +30,8 @@ pub struct Projected {
 /// Cached projections and superpixels per view index (see the module docs).
 #[derive(Default)]
 pub struct ViewCache {
-    projections: Mutex<HashMap<usize, Arc<Vec<Projected>>>>,
+    /// By (view, number of points).
+    projections: Mutex<HashMap<(usize, usize), Arc<Vec<Projected>>>>,
     oversegmentations: Mutex<HashMap<usize, Arc<Oversegmentation>>>,
     options: BoundaryOptions,
 }
@@ -45,11 +48,12 @@ impl ViewCache {
         &self.options
     }
 
-    /// Projections of the points seen in view `view` (computed once).
+    /// Projections of the points seen in view `view` (computed once per point set, told apart
+    /// by their number, see the module docs).
     pub fn projected(&self, scene: &Scene, points: &PointSet, view: usize) -> Arc<Vec<Projected>> {
         let mut cache = self.projections.lock().unwrap_or_else(|e| e.into_inner());
         cache
-            .entry(view)
+            .entry((view, points.len()))
             .or_insert_with(|| {
                 let model = &scene.reconstruction;
                 let image = &model.images()[view];
