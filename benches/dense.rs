@@ -2,8 +2,9 @@
 //! 2-core machine). A 36-view 800×600 broadleaf with sparse-like points (true poses); the full
 //! `densify` beside its two halves measured in the same run: the depth maps alone
 //! (rectification + semi-global matching, the baseline every pairwise-stereo method pays) and
-//! the fusion alone on those maps, and the full `densify` with the short-bar option and with
-//! two stereo partners per view.
+//! the fusion alone on those maps, and the full `densify` with the short-bar option, with
+//! two stereo partners per view and without the fill partner (the default fuses one partner's
+//! maps, then both partners' maps for the gap fills).
 
 use std::hint::black_box;
 
@@ -42,8 +43,15 @@ fn dense(c: &mut Criterion) {
     // README's trait accuracy) against the default in the same run.
     let mut two_partners = densify_options;
     two_partners.pairs.partners_per_view = 2;
+    two_partners.pairs.fill_partners_per_view = 0;
     group.bench_function("full_partners_2", |b| {
         b.iter(|| black_box(densify(&scene, &two_partners, &NoProgress).expect("densify")))
+    });
+    // Without the fill partner (`--fill-partners 0`): one depth map per view, one fusion.
+    let mut no_fill = densify_options;
+    no_fill.pairs.fill_partners_per_view = 0;
+    group.bench_function("full_no_fill", |b| {
+        b.iter(|| black_box(densify(&scene, &no_fill, &NoProgress).expect("densify")))
     });
     group.bench_function("depth_maps_only", |b| {
         b.iter(|| black_box(depth_maps(&scene, &densify_options, &NoProgress).expect("maps")))

@@ -12,6 +12,7 @@ use frond::eval::dense::{point_accuracy, thin_organ_accuracy};
 use frond::graph::points::PointSet;
 use frond::mvs::{DensifyOptions, MvsError, dense_model, densify, write_workspace};
 use frond::scene::{Reconstruction, Scene, write_model};
+use frond::segment::{SegmentOptions, segment_scene};
 use frond::synth::{Preset, SynthOptions};
 use frond::util::progress::NoProgress;
 use tempfile::TempDir;
@@ -123,6 +124,68 @@ fn the_thin_organ_sweep_adds_the_stems_and_petioles_stereo_misses() {
     );
     assert!(a.median_surface_distance <= 0.001, "{a:?}");
     assert!(a.halo_fraction <= 0.1, "{a:?}");
+}
+
+#[test]
+fn fill_partners_add_points_only_where_the_main_partners_left_gaps() {
+    let scene = Scene::open(dataset()).unwrap();
+    let truth = GroundTruth::load(dataset()).unwrap();
+    let mut main_only = DensifyOptions::default();
+    main_only.pairs.fill_partners_per_view = 0;
+    let with_fills = DensifyOptions::default();
+    assert_eq!(with_fills.pairs.fill_partners_per_view, 1);
+    let (main, _) = densify(&scene, &main_only, &NoProgress).unwrap();
+    let (filled, report) = densify(&scene, &with_fills, &NoProgress).unwrap();
+    eprintln!(
+        "{} main points, {} gap fills from {} fill maps",
+        main.len(),
+        report.gap_fill_points,
+        report.fill_maps
+    );
+    assert_eq!(report.fill_maps, 24, "{report:?}");
+    // The main partners' points (and the thin-organ sweep's) come first, exactly as without
+    // fill partners; then the fills, each marked.
+    assert!(report.gap_fill_points > 0);
+    assert_eq!(filled.len(), main.len() + report.gap_fill_points);
+    assert_eq!(
+        filled.positions_world[..main.len()],
+        main.positions_world[..]
+    );
+    assert_eq!(filled.views[..main.len()], main.views[..]);
+    assert_eq!(filled.thin_organ[..main.len()], main.thin_organ[..]);
+    assert!((0..main.len()).all(|k| !filled.is_gap_fill(k)));
+    assert!((main.len()..filled.len()).all(|k| filled.is_gap_fill(k)));
+    // The fills are surface the main points missed, not noise: they lie on the true surfaces
+    // as closely as the main points do.
+    let fills = &filled.positions_world[main.len()..];
+    let on_truth = point_accuracy(&truth, fills, 0.02).unwrap();
+    let main_accuracy = point_accuracy(&truth, &main.positions_world, 0.02).unwrap();
+    eprintln!("fills {on_truth:?}\nmain {main_accuracy:?}");
+    assert!(
+        on_truth.median_error_fraction_of_height <= 0.005,
+        "{on_truth:?}"
+    );
+
+    // The workspace says which points are fills; the segmentation leaves them out of its
+    // points and keeps them for the leaf stage.
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("dense");
+    write_workspace(&scene, &filled, &report, &with_fills, &out).unwrap();
+    let reread = Scene::open(&out).unwrap();
+    let set = PointSet::from_scene(&reread);
+    let expected = dense_model(&scene.reconstruction, &filled)
+        .unwrap()
+        .gap_fill;
+    assert_eq!(set.gap_fill, expected);
+    let written_fills = expected.iter().filter(|&&f| f).count();
+    assert!(written_fills > 0);
+    let (points, gap_fills) = set.split_gap_fills();
+    assert_eq!(gap_fills.len(), written_fills);
+    assert!(points.gap_fill.is_empty() && gap_fills.gap_fill.is_empty());
+    let segmentation = segment_scene(&reread, &SegmentOptions::default(), &NoProgress).unwrap();
+    assert_eq!(segmentation.points.len(), points.len());
+    assert_eq!(segmentation.points.positions, points.positions);
+    assert_eq!(segmentation.gap_fills.positions, gap_fills.positions);
 }
 
 #[test]

@@ -751,15 +751,16 @@ struct DensifyArgs {
     /// consistency check to sort out).
     #[arg(long, default_value_t = 10)]
     uniqueness: i32,
-    /// Stereo partners per view (each gives the view one depth map). 2 covers weakly
-    /// textured leaves more completely (better leaf area and length) but adds points along
-    /// leaf rims that the skeleton draws as branches (see the README's "Two stereo partners").
+    /// Stereo partners per view (each gives the view one depth map) whose points every stage
+    /// uses. 2 covers weakly textured leaves more completely but adds points along leaf rims
+    /// that the skeleton draws as branches (see the README's "Two stereo partners"); the fill
+    /// partners below give the leaves that coverage without it.
     #[arg(long, default_value_t = 1)]
     partners: usize,
     /// Further stereo partners per view whose depth maps only fill the gaps the main
-    /// partners' points leave (weakly textured leaves); the skeleton leaves those points out
-    /// (see the README's "Gap fills").
-    #[arg(long, default_value_t = 0)]
+    /// partners' points leave (weakly textured leaves); only the leaf stage uses those points,
+    /// the segmentation and the skeleton leave them out (see the README's "Gap fills"; 0: none).
+    #[arg(long, default_value_t = 1)]
     fill_partners: usize,
     /// Other depth maps that must agree with a depth for it to be kept.
     #[arg(long, default_value_t = 4)]

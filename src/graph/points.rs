@@ -193,6 +193,29 @@ mod tests {
     use super::*;
 
     #[test]
+    fn gap_fills_split_off_in_order() {
+        let mut set = PointSet::default();
+        for k in 0..5 {
+            set.positions.push(Point3::new(k as f64, 0.0, 0.0));
+            set.colors.push([k as u8; 3]);
+            set.views.push(vec![k as u32]);
+            set.point_ids.push(10 + k as u64);
+        }
+        set.thin_organ = vec![true, false, false, false, false];
+        // No fills: everything is the main set.
+        let (main, fills) = set.clone().split_gap_fills();
+        assert_eq!((main.len(), fills.len()), (5, 0));
+        set.gap_fill = vec![false, true, false, true, true];
+        assert!(set.is_gap_fill(1) && !set.is_gap_fill(2) && !set.is_gap_fill(9));
+        let (main, fills) = set.split_gap_fills();
+        assert_eq!(main.point_ids, vec![10, 12]);
+        assert_eq!(fills.point_ids, vec![11, 13, 14]);
+        assert_eq!(main.thin_organ, vec![true, false]);
+        assert_eq!(fills.views, vec![vec![1], vec![3], vec![4]]);
+        assert!(main.gap_fill.is_empty() && fills.gap_fill.is_empty());
+    }
+
+    #[test]
     fn a_subset_keeps_which_points_the_thin_organ_sweep_found() {
         let mut set = PointSet::default();
         for k in 0..4 {

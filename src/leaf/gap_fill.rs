@@ -302,10 +302,11 @@ mod tests {
 
     #[test]
     fn a_leaf_sampled_on_one_half_takes_the_fills_of_its_other_half_and_no_others() {
-        // Leaf 0: a 20×20 sheet at z = 0 of which stereo sampled columns 0–7; the fills cover
-        // columns 8–21, of which the floor sampled at columns 22–24 is nearer to 20 and 21. A
-        // stem (not a leaf, not the floor) stands at x = 40 with fills around it, and a
-        // second sheet of fills lies 10 units above the leaf (another leaf, not sampled).
+        // Leaf 0: a sheet at z = 0 of which stereo sampled columns 0–7; fills continue it over
+        // columns 8–21 to the floor, sampled at columns 22–24 in the same plane: the leaf takes
+        // the fills nearer to it than to the floor (x < 14.5), the floor the rest. A stem (not
+        // a leaf, not the floor) stands at x = 40 with fills around it, and a second sheet of
+        // fills lies 10 units above the leaf (another leaf, not sampled).
         let mut main: Vec<Point3<f64>> = grid(20, 0.0, 0.0)
             .into_iter()
             .filter(|p| p.x < 8.0)
@@ -330,14 +331,14 @@ mod tests {
         let assigned = assign(&set(main.clone()), &labels, &classes, &set(fills.clone()));
         for (k, &s) in assigned[..between].iter().enumerate() {
             let x = fills[k].x;
-            assert_eq!(s, if x < 20.0 { 0 } else { -1 }, "fill at x = {x}");
+            assert_eq!(s, if x < 14.5 { 0 } else { -1 }, "fill at x = {x}");
         }
         assert!(assigned[between..].iter().all(|&s| s == -1));
 
         let (all, extended) =
             with_gap_fills(&set(main.clone()), &labels, &classes, &set(fills.clone()));
         assert_eq!(all.len(), main.len() + fills.len());
-        assert_eq!(extended.members(0).len(), sampled + 20 * 12);
+        assert_eq!(extended.members(0).len(), sampled + 20 * 7);
         assert!(!all.is_gap_fill(0) && all.is_gap_fill(main.len()));
     }
 

@@ -26,7 +26,8 @@ pub struct StereoPair {
 pub struct PairOptions {
     pub partners_per_view: usize,
     /// Further partners per view (ranked after the first `partners_per_view`) whose depth maps
-    /// only fill the gaps the others' fused points leave (see [`super::densify`]): 0 for none.
+    /// only fill the gaps the others' fused points leave (see [`super::densify`]): 0 for none,
+    /// 1 by default (leaf length and area from photos, README: *Gap fills*).
     pub fill_partners_per_view: usize,
     /// Triangulation angles outside `[min, max]` are never used; `ideal` scores best.
     pub min_angle_deg: f64,
@@ -40,7 +41,7 @@ impl Default for PairOptions {
     fn default() -> Self {
         Self {
             partners_per_view: 1,
-            fill_partners_per_view: 0,
+            fill_partners_per_view: 1,
             min_angle_deg: 3.0,
             ideal_angle_deg: 12.0,
             max_angle_deg: 35.0,
