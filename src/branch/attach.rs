@@ -332,6 +332,8 @@ mod tests {
                     fit,
                 })
                 .collect(),
+            gap_fills: 0,
+            gap_fills_on_leaves: 0,
             skipped: Vec::new(),
             unusable_views: Vec::new(),
             boundaries: Default::default(),

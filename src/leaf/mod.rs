@@ -115,6 +115,10 @@ pub struct LeafReconstruction {
     #[serde(skip)]
     pub boundaries: Boundaries,
     pub timings: LeafTimings,
+    /// Gap fills ([`gap_fill`]) the leaves were fitted with: in the input, and on leaf
+    /// segments.
+    pub gap_fills: usize,
+    pub gap_fills_on_leaves: usize,
 }
 
 /// Leaf-stage failures.
@@ -1080,6 +1084,8 @@ pub fn reconstruct_leaves(
         unusable_views: boundaries.unusable_views,
         boundaries: computed,
         timings,
+        gap_fills: 0,
+        gap_fills_on_leaves: 0,
     })
 }
 

@@ -172,7 +172,7 @@ fn sparse_disparities(
 /// fused alone first, exactly as without them (same points, same thin-organ sweep), and then
 /// all maps together; a point of the second fusion is added, marked as a gap fill
 /// ([`FusedPoints::gap_fill`]), only where the first left the surface bare (fewer than
-/// [`MAX_MAIN_AROUND`] main points within two voxels). Measured (README: *Gap fills from a
+/// [`MAX_MAIN_AROUND`] of its points, the thin-organ sweep's included, within two voxels). Measured (README: *Gap fills from a
 /// second partner*): a second partner covers weakly textured leaves that one misses, and also
 /// adds bands of points along leaf rims that the skeleton would follow, which is why the
 /// skeleton leaves gap fills out.

@@ -405,14 +405,16 @@ pub fn fit_leaves(
             &state.segmentation.foreground.class,
             fills,
         );
-        let n = state.segmentation.points.len();
-        let on_leaves = extended.1.segment_of[n..]
-            .iter()
-            .filter(|&&s| s >= 0)
-            .count();
-        tracing::info!("gap fills: {on_leaves} of {} on leaf segments", fills.len());
         (&extended.0, &extended.1)
     };
+    let n = state.segmentation.points.len();
+    let on_leaves = labels.segment_of[n.min(labels.segment_of.len())..]
+        .iter()
+        .filter(|&&s| s >= 0)
+        .count();
+    if !fills.is_empty() {
+        tracing::info!("gap fills: {on_leaves} of {} on leaf segments", fills.len());
+    }
     let input = LeafInput {
         scene: state.scene,
         points,
@@ -420,7 +422,10 @@ pub fn fit_leaves(
         plant: &plant,
         views: state.views,
     };
-    reconstruct_leaves(&input, options, progress)
+    let mut leaves = reconstruct_leaves(&input, options, progress)?;
+    leaves.gap_fills = fills.len();
+    leaves.gap_fills_on_leaves = on_leaves;
+    Ok(leaves)
 }
 
 /// A plant model with how its leaves were attached.
@@ -535,6 +540,12 @@ pub struct ReportCounts {
     pub segments: usize,
     pub leaves_fitted: usize,
     pub leaves_skipped: usize,
+    /// Gap fills of the input (`frond densify --fill-partners`), and those the leaf stage
+    /// fitted leaves with (see the README's *Gap fills*).
+    #[serde(default)]
+    pub gap_fills: usize,
+    #[serde(default)]
+    pub gap_fills_on_leaves: usize,
     pub branches: usize,
     pub petioles: usize,
     pub leaves_touching_branches: usize,
@@ -784,6 +795,8 @@ pub fn write_plant(
             segments: state.labels.segments.iter().flatten().count(),
             leaves_fitted: leaves.leaves.len(),
             leaves_skipped: leaves.skipped.len(),
+            gap_fills: leaves.gap_fills,
+            gap_fills_on_leaves: leaves.gap_fills_on_leaves,
             branches: state.branches.branches.len(),
             petioles: attachment.petioles.len(),
             leaves_touching_branches: attachment.touching,
