@@ -130,6 +130,13 @@ fn claim_of(labels: &Labels, classes: &[PointClass], i: usize) -> Option<i32> {
     }
 }
 
+/// A fill point's neighbourhood: the fill points within one edge (index, distance), and the
+/// nearest segmented point within one edge of each claim (label, distance).
+struct Around {
+    fill_neighbours: Vec<(u32, f64)>,
+    seeds: Vec<(i32, f64)>,
+}
+
 /// The leaf segment of each fill point under `labels` and the foreground `classes` (both of
 /// `points`), −1 for none (see the module docs).
 pub fn assign(
@@ -169,7 +176,7 @@ pub fn assign(
     };
     let radius = EDGE_SPACINGS * spacing;
     // Per fill point: its fill neighbours and the nearest segmented point of each claim.
-    let around: Vec<(Vec<(u32, f64)>, Vec<(i32, f64)>)> = fills
+    let around: Vec<Around> = fills
         .positions
         .par_iter()
         .map(|p| {
@@ -185,12 +192,15 @@ pub fn assign(
                     seeds.push((label, d));
                 }
             }
-            (fill_neighbours, seeds)
+            Around {
+                fill_neighbours,
+                seeds,
+            }
         })
         .collect();
     let mut heap = BinaryHeap::new();
-    for (f, (_, seeds)) in around.iter().enumerate() {
-        for &(label, distance) in seeds {
+    for (f, a) in around.iter().enumerate() {
+        for &(label, distance) in &a.seeds {
             heap.push(Reverse(Claim {
                 distance,
                 fill: f as u32,
@@ -213,7 +223,7 @@ pub fn assign(
         }
         settled[f] = true;
         assigned[f] = claim.label;
-        for &(g, d) in &around[f].0 {
+        for &(g, d) in &around[f].fill_neighbours {
             if !settled[g as usize] {
                 heap.push(Reverse(Claim {
                     distance: claim.distance + d,

@@ -27,11 +27,13 @@ pub struct Projected {
     pub depth_camera: f64,
 }
 
+/// Projections by (view, number of points).
+type ProjectionsByView = HashMap<(usize, usize), Arc<Vec<Projected>>>;
+
 /// Cached projections and superpixels per view index (see the module docs).
 #[derive(Default)]
 pub struct ViewCache {
-    /// By (view, number of points).
-    projections: Mutex<HashMap<(usize, usize), Arc<Vec<Projected>>>>,
+    projections: Mutex<ProjectionsByView>,
     oversegmentations: Mutex<HashMap<usize, Arc<Oversegmentation>>>,
     options: BoundaryOptions,
 }
