@@ -53,6 +53,7 @@ fn dense(c: &mut Criterion) {
     group.bench_function("full_no_fill", |b| {
         b.iter(|| black_box(densify(&scene, &no_fill, &NoProgress).expect("densify")))
     });
+    // The depth maps of both partners (the default's) and their fusion in one.
     group.bench_function("depth_maps_only", |b| {
         b.iter(|| black_box(depth_maps(&scene, &densify_options, &NoProgress).expect("maps")))
     });

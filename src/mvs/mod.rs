@@ -188,8 +188,7 @@ pub fn densify(
                 .iter()
                 .map(|p| (p.left, p.right))
                 .collect();
-        maps.into_iter()
-            .partition(|m| main.contains(&(m.pair.left, m.pair.right)))
+        main_and_fill(maps, |m| main.contains(&(m.pair.left, m.pair.right)))
     } else {
         (maps, Vec::new())
     };
@@ -259,6 +258,17 @@ pub fn densify(
         fused.views.iter().map(Vec::len).sum::<usize>() as f64 / fused.len() as f64
     };
     Ok((fused, report))
+}
+
+/// The main partners' maps and the fill partners' (each in order); when every main pair
+/// failed, the fill partners' maps are all there is and become the main ones.
+fn main_and_fill<T>(maps: Vec<T>, is_main: impl Fn(&T) -> bool) -> (Vec<T>, Vec<T>) {
+    let (main, fill): (Vec<T>, Vec<T>) = maps.into_iter().partition(|m| is_main(m));
+    if main.is_empty() {
+        (fill, Vec::new())
+    } else {
+        (main, fill)
+    }
 }
 
 /// A surface patch the main maps sampled has about π·2² ≈ 12 of their points within two
@@ -692,4 +702,19 @@ pub fn write_workspace(
     write_atomic(&json_path, text.as_bytes()).map_err(|e| output_error(&json_path, e))?;
     staging.commit().map_err(|e| output_error(out, e))?;
     Ok(dense)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fill_maps_stand_in_when_every_main_pair_failed() {
+        let (main, fill) = main_and_fill(vec![1, 2, 3, 4, 5], |m| m % 2 == 1);
+        assert_eq!((main, fill), (vec![1, 3, 5], vec![2, 4]));
+        let (main, fill) = main_and_fill(vec![2, 4], |m| m % 2 == 1);
+        assert_eq!((main, fill), (vec![2, 4], Vec::<i32>::new()));
+        let (main, fill) = main_and_fill(Vec::<i32>::new(), |_| true);
+        assert!(main.is_empty() && fill.is_empty());
+    }
 }
