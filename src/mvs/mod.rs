@@ -172,10 +172,10 @@ fn sparse_disparities(
 /// fused alone first, exactly as without them (same points, same thin-organ sweep), and then
 /// all maps together; a point of the second fusion is added, marked as a gap fill
 /// ([`FusedPoints::gap_fill`]), only where the first left the surface bare (fewer than
-/// [`MAX_MAIN_AROUND`] of its points, the thin-organ sweep's included, within two voxels). Measured (README: *Gap fills from a
-/// second partner*): a second partner covers weakly textured leaves that one misses, and also
-/// adds bands of points along leaf rims that the skeleton would follow, which is why the
-/// skeleton leaves gap fills out.
+/// [`MAX_MAIN_AROUND`] of its points, the thin-organ sweep's included, within two voxels).
+/// Measured (README: *Gap fills*): a second partner covers weakly textured leaves that one
+/// misses, and also adds bands of points along leaf rims that the skeleton would follow, which
+/// is why only the leaf stage uses gap fills.
 pub fn densify(
     scene: &Scene,
     options: &DensifyOptions,
@@ -283,7 +283,7 @@ fn where_main_is_sparse(all: FusedPoints, main: &FusedPoints, voxel: f64) -> Fus
             Ok(index) => all
                 .positions_world
                 .par_iter()
-                .map(|p| index.within_radius_unsorted(p, 2.0 * voxel).len() < MAX_MAIN_AROUND)
+                .map(|p| index.count_within(p, 2.0 * voxel, |_| true).0 < MAX_MAIN_AROUND)
                 .collect(),
             Err(_) => vec![true; all.len()],
         };
