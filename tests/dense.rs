@@ -191,6 +191,28 @@ fn fill_partners_add_points_only_where_the_main_partners_left_gaps() {
     assert_eq!(segmentation.points.len(), points.len());
     assert_eq!(segmentation.points.positions, points.positions);
     assert_eq!(segmentation.gap_fills.positions, gap_fills.positions);
+    // The skeleton takes the fills back, each labelled and classed, after the segmented points.
+    let labels = frond::segment::Labels::automatic(&segmentation);
+    let (extended, extended_labels) =
+        frond::branch::plant::with_gap_fills(&segmentation, &labels).expect("fills");
+    let all = points.len() + gap_fills.len();
+    assert_eq!(extended.points.len(), all);
+    assert_eq!(extended.foreground.class.len(), all);
+    assert_eq!(extended_labels.segment_of.len(), all);
+    assert_eq!(
+        extended.points.positions[..points.len()],
+        points.positions[..]
+    );
+    assert_eq!(
+        extended_labels.segment_of[..points.len()],
+        labels.segment_of[..]
+    );
+    assert!((points.len()..all).all(|i| extended.points.is_gap_fill(i)));
+    let on_leaves = extended_labels.segment_of[points.len()..]
+        .iter()
+        .filter(|&&s| s >= 0)
+        .count();
+    assert!(on_leaves > 0, "no fill on a leaf");
 }
 
 #[test]

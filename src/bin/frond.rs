@@ -758,8 +758,8 @@ struct DensifyArgs {
     #[arg(long, default_value_t = 1)]
     partners: usize,
     /// Further stereo partners per view whose depth maps only fill the gaps the main
-    /// partners' points leave (weakly textured leaves); only the leaf stage uses those points,
-    /// the segmentation and the skeleton leave them out (see the README's "Gap fills"; 0: none).
+    /// partners' points leave (weakly textured leaves); the segmentation leaves those points
+    /// out, the leaves and the skeleton use them (see the README's "Gap fills"; 0: none).
     #[arg(long, default_value_t = 1)]
     fill_partners: usize,
     /// Other depth maps that must agree with a depth for it to be kept.

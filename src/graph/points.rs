@@ -29,8 +29,8 @@ pub struct PointSet {
     /// does not say: sparse points, COLMAP's dense points).
     pub thin_organ: Vec<bool>,
     /// Per point: whether it fills a gap of the main stereo partners' points (`frond
-    /// densify`'s fill partners): leaves use these points, the skeleton does not (empty when
-    /// the input does not say).
+    /// densify`'s fill partners): the segmentation leaves these points out, the leaf stage and
+    /// the skeleton label them from its segments (empty when the input does not say).
     pub gap_fill: Vec<bool>,
 }
 

@@ -1,10 +1,10 @@
 //! Gap fills for the leaf stage. `frond densify --fill-partners` adds points from further
 //! stereo partners where the main partners' points leave a surface bare
 //! ([`PointSet::gap_fill`]): mostly the weakly textured parts of leaves that one partner's
-//! depth maps miss. The segmentation and the skeleton never see them (a second partner also
-//! puts bands of points along leaf rims, which the skeleton drew as branches); the leaf stage
-//! does, so a leaf that stereo sampled in part gets its points, plane, views and image region
-//! from more of its blade.
+//! depth maps miss. The segmentation never sees them (a second partner's points along leaf
+//! rims cost leaf precision there); the leaf stage does, so a leaf that stereo sampled in part
+//! gets its points, plane, views and image region from more of its blade, and so does the
+//! skeleton, with each fill point classed by what it continues ([`classes`]).
 //!
 //! Each fill point takes the label of the segmented points that reach it first along chains
 //! of fill points: a geodesic Voronoi partition from every segmented point at once, edges no
@@ -242,6 +242,42 @@ pub fn assign(
     assigned
 }
 
+/// The foreground class of each fill point for the skeleton, given the leaf [`assign`] gave it
+/// (`assigned`): a fill point on a leaf is a plant point (its leaf's sheet), any other takes the
+/// class of the nearest segmented point within one edge ([`EDGE_SPACINGS`]), and is an outlier
+/// beyond: a fill in a gap of a stem continues the stem, one in a gap of the floor the floor.
+pub fn classes(
+    points: &PointSet,
+    classes: &[PointClass],
+    fills: &PointSet,
+    assigned: &[i32],
+) -> Vec<PointClass> {
+    let n = points.len().min(classes.len());
+    let spacing = median_spacing(points);
+    let index = Neighbours::new(points.positions[..n].iter().copied()).ok();
+    fills
+        .positions
+        .par_iter()
+        .enumerate()
+        .map(|(k, p)| {
+            if assigned.get(k).is_some_and(|&s| s >= 0) {
+                return PointClass::Plant;
+            }
+            index
+                .as_ref()
+                .filter(|_| spacing > 0.0)
+                .and_then(|index| {
+                    index
+                        .nearest_k(p, std::num::NonZero::<usize>::MIN)
+                        .first()
+                        .copied()
+                })
+                .filter(|nearest| nearest.distance() <= EDGE_SPACINGS * spacing)
+                .map_or(PointClass::Outlier, |nearest| classes[nearest.index])
+        })
+        .collect()
+}
+
 /// The points followed by the fill points (marked as gap fills), and the labels with each
 /// fill point in the leaf [`assign`] gives it.
 pub fn with_gap_fills(
@@ -384,6 +420,38 @@ mod tests {
         let run = &assigned[flat + steep..];
         assert!(run[..20].iter().all(|&s| s == 0), "{run:?}");
         assert!(run[30..].iter().all(|&s| s == -1), "{run:?}");
+    }
+
+    #[test]
+    fn fills_off_the_leaves_take_the_class_of_what_they_continue() {
+        // A stem sampled at x = 0..4 and a floor patch at x = 20..24; fills continue each
+        // (x = 5, 6 and x = 25), one lies on a leaf (assigned 0), one floats far from all.
+        let main: Vec<Point3<f64>> = (0..5)
+            .map(|x| Point3::new(x as f64, 0.0, 0.0))
+            .chain((20..25).map(|x| Point3::new(x as f64, 0.0, 0.0)))
+            .collect();
+        let mut point_classes = vec![PointClass::Stem; 5];
+        point_classes.extend(vec![PointClass::Floor; 5]);
+        let fills = set(vec![
+            Point3::new(5.0, 0.0, 0.0),
+            Point3::new(6.0, 0.0, 0.0),
+            Point3::new(25.0, 0.0, 0.0),
+            Point3::new(21.0, 1.0, 0.0),
+            Point3::new(50.0, 50.0, 0.0),
+        ]);
+        let assigned = [-1, -1, -1, 0, -1];
+        let got = classes(&set(main), &point_classes, &fills, &assigned);
+        assert_eq!(
+            got,
+            vec![
+                PointClass::Stem,
+                // 2 from the stem's end: within 2.5 spacings.
+                PointClass::Stem,
+                PointClass::Floor,
+                PointClass::Plant,
+                PointClass::Outlier,
+            ]
+        );
     }
 
     #[test]

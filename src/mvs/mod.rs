@@ -174,8 +174,8 @@ fn sparse_disparities(
 /// ([`FusedPoints::gap_fill`]), only where the first left the surface bare (fewer than
 /// [`MAX_MAIN_AROUND`] of its points, the thin-organ sweep's included, within two voxels).
 /// Measured (README: *Gap fills*): a second partner covers weakly textured leaves that one
-/// misses, and also adds bands of points along leaf rims that the skeleton would follow, which
-/// is why only the leaf stage uses gap fills.
+/// misses, and also adds points along leaf rims that cost the segmentation's leaf precision,
+/// which is why the segmentation leaves gap fills out.
 pub fn densify(
     scene: &Scene,
     options: &DensifyOptions,

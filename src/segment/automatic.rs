@@ -132,7 +132,8 @@ pub struct Segmentation {
     #[serde(skip)]
     pub graph_points: Vec<usize>,
     /// The input's gap fills ([`PointSet::gap_fill`]), left out of `points` and every step
-    /// here; the leaf stage labels them from the segments ([`crate::leaf::gap_fill`]).
+    /// here; the leaf stage and the skeleton label them from the segments
+    /// ([`crate::leaf::gap_fill`]).
     #[serde(skip)]
     pub gap_fills: PointSet,
 }
