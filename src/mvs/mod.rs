@@ -287,17 +287,7 @@ fn where_main_is_sparse(all: FusedPoints, main: &FusedPoints, voxel: f64) -> Fus
                 .collect(),
             Err(_) => vec![true; all.len()],
         };
-    let mut out = FusedPoints::default();
-    for (k, keep) in keep.into_iter().enumerate() {
-        if keep {
-            out.positions_world.push(all.positions_world[k]);
-            out.colors.push(all.colors[k]);
-            out.views.push(all.views[k].clone());
-            out.support.push(all.support[k]);
-            out.thin_organ.push(false);
-        }
-    }
-    out
+    thin::select(all, &keep)
 }
 
 /// The stereo half of [`densify`]: view pairs, region of interest, and one depth map per

@@ -832,7 +832,8 @@ pub fn where_stereo_is_sparse(
     (kept, stats)
 }
 
-fn select(points: FusedPoints, keep: &[bool]) -> FusedPoints {
+/// The points whose `keep` is true, in order.
+pub(super) fn select(points: FusedPoints, keep: &[bool]) -> FusedPoints {
     let mut out = FusedPoints::default();
     for (k, &keep) in keep.iter().enumerate() {
         if keep {
