@@ -281,8 +281,13 @@ fn main() -> Result<()> {
             branch.radius_end *= similarity.scale;
         }
         let petioles = frond::eval::geometry::petiole_ids(&truth.branches, &truth.leaves);
-        let scores =
-            frond::eval::geometry::skeleton_length_scores(&truth.branches, &petioles, &records);
+        let surfaces = frond::eval::geometry::TrueSurfaces::new(&truth.surface_samples);
+        let scores = frond::eval::geometry::skeleton_length_scores(
+            &truth.branches,
+            &petioles,
+            &records,
+            &surfaces,
+        );
         println!(
             "SCORE branch recall {:.3} petiole recall {:.3} precision {:.3} of {:.3} m",
             scores.branch_recall, scores.petiole_recall, scores.precision, scores.predicted_length

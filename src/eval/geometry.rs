@@ -5,10 +5,13 @@ use nalgebra::Point3;
 use std::collections::BTreeSet;
 
 use super::{
-    GtLeafRecord, PredictedBranchScore, SkeletonLengthScores, SkeletonRecord, SkeletonScores,
+    GtLeafRecord, LabelledPoints, OffPlantLength, PredictedBranchScore, SkeletonLengthScores,
+    SkeletonRecord, SkeletonScores,
 };
 use crate::branch::spline::point_segment_distance;
+use crate::graph::neighbours::Neighbours;
 use crate::mesh::{TriMesh, point_triangle_distance};
+use crate::synth::scene::Part;
 use crate::util::rng::Rng;
 
 /// Exact distance from `p` to the surface of `mesh` (brute force over triangles with a
@@ -112,12 +115,55 @@ fn pieces(line: &[[f64; 3]], step: f64) -> Vec<(Point3<f64>, f64)> {
     out
 }
 
+/// The true surfaces an off-plant piece of skeleton may lie on: the ground truth's surface
+/// samples with their parts (points without a part are left out).
+pub struct TrueSurfaces {
+    samples: Option<Neighbours>,
+    parts: Vec<Part>,
+}
+
+impl TrueSurfaces {
+    pub fn new(samples: &LabelledPoints) -> Self {
+        let (positions, parts): (Vec<Point3<f64>>, Vec<Part>) = match &samples.parts {
+            Some(parts) => samples
+                .positions
+                .iter()
+                .copied()
+                .zip(parts.iter().copied())
+                .unzip(),
+            None => (Vec::new(), Vec::new()),
+        };
+        let samples = (!positions.is_empty())
+            .then(|| Neighbours::new(positions).ok())
+            .flatten();
+        Self { samples, parts }
+    }
+
+    /// No surfaces: every off-plant piece counts as `elsewhere`.
+    pub fn none() -> Self {
+        Self {
+            samples: None,
+            parts: Vec::new(),
+        }
+    }
+
+    /// The part of the nearest sample within [`OffPlantLength::NEAR`] of `p`.
+    fn part_near(&self, p: &Point3<f64>) -> Option<Part> {
+        let nearest = self.samples.as_ref()?.nearest(p)?;
+        (nearest.distance() <= OffPlantLength::NEAR)
+            .then(|| self.parts.get(nearest.index).copied())
+            .flatten()
+    }
+}
+
 /// Length-weighted recall (branches and petioles apart) and precision of a predicted skeleton
-/// (see [`SkeletonLengthScores`]).
+/// (see [`SkeletonLengthScores`]); the length off the plant is told apart by the true surface
+/// it lies near.
 pub fn skeleton_length_scores(
     gt: &[SkeletonRecord],
     petioles: &BTreeSet<u32>,
     predicted: &[SkeletonRecord],
+    surfaces: &TrueSurfaces,
 ) -> SkeletonLengthScores {
     const STEP: f64 = 0.001;
     let tolerance = |b: &SkeletonRecord| (2.0 * b.mean_radius()).max(0.003);
@@ -144,6 +190,7 @@ pub fn skeleton_length_scores(
         })
         .collect();
     let (mut on, mut predicted_length) = (0.0, 0.0);
+    let mut off_plant = OffPlantLength::default();
     let mut per_branch = Vec::with_capacity(predicted.len());
     for branch in predicted {
         let (mut branch_on, mut branch_length) = (0.0, 0.0);
@@ -155,6 +202,13 @@ pub fn skeleton_length_scores(
             });
             if near {
                 branch_on += length;
+            } else {
+                match surfaces.part_near(&p) {
+                    Some(Part::Leaf) => off_plant.on_leaves += length,
+                    Some(Part::Stem) => off_plant.beside_stems += length,
+                    Some(Part::Pot) => off_plant.on_pot += length,
+                    _ => off_plant.elsewhere += length,
+                }
             }
         }
         predicted_length += branch_length;
@@ -176,6 +230,7 @@ pub fn skeleton_length_scores(
         petiole_recall: share(found[1], total[1]),
         precision: share(on, predicted_length),
         predicted_branches: per_branch,
+        off_plant,
     }
 }
 
@@ -185,6 +240,7 @@ pub fn score_skeleton(
     gt: &[SkeletonRecord],
     petioles: &BTreeSet<u32>,
     predicted: &[SkeletonRecord],
+    surfaces: &TrueSurfaces,
 ) -> SkeletonScores {
     let lines: Vec<Vec<Point3<f64>>> = predicted
         .iter()
@@ -227,7 +283,7 @@ pub fn score_skeleton(
         } else {
             matched as f64 / eligible.len() as f64
         },
-        length: skeleton_length_scores(gt, petioles, predicted),
+        length: skeleton_length_scores(gt, petioles, predicted, surfaces),
     }
 }
 
@@ -293,7 +349,7 @@ mod tests {
         };
         let gt = vec![stem.clone()];
         let none = BTreeSet::new();
-        let perfect = score_skeleton(&gt, &none, &gt);
+        let perfect = score_skeleton(&gt, &none, &gt, &TrueSurfaces::none());
         assert!(perfect.stem_distance_in_radii.unwrap() < 1e-9);
         assert_eq!(perfect.branch_recall, 1.0);
         assert!((perfect.length.branch_recall - 1.0).abs() < 1e-9);
@@ -303,7 +359,7 @@ mod tests {
         for c in &mut shifted.centerline {
             c[0] += 0.05;
         }
-        let scores = score_skeleton(&gt, &none, &[shifted]);
+        let scores = score_skeleton(&gt, &none, &[shifted], &TrueSurfaces::none());
         assert!((scores.stem_distance_in_radii.unwrap() - 5.0).abs() < 1e-6);
         assert_eq!(scores.matched_branches, 0);
         assert_eq!(scores.length.branch_recall, 0.0);
@@ -402,7 +458,20 @@ mod tests {
         for c in &mut off.centerline {
             c[0] += 0.002;
         }
-        let scores = skeleton_length_scores(&gt, &petioles, &[off, rim.clone()]);
+        // The true surfaces: the pot's rim sampled every millimetre, 1 mm below the drawn rim.
+        let rim_samples: Vec<Point3<f64>> = (0..628)
+            .map(|k| {
+                let a = k as f64 / 628.0 * std::f64::consts::TAU;
+                Point3::new(0.1 * a.cos(), 0.1 * a.sin(), -0.051)
+            })
+            .collect();
+        let surfaces = TrueSurfaces::new(&LabelledPoints {
+            parts: Some(vec![Part::Pot; rim_samples.len()]),
+            leaf_ids: vec![-1; rim_samples.len()],
+            point_ids: None,
+            positions: rim_samples,
+        });
+        let scores = skeleton_length_scores(&gt, &petioles, &[off, rim.clone()], &surfaces);
         // Branch length is stem + twig = 0.4 m; the stem (0.3 m) is found. Petioles 0.25 m,
         // none found except where the petiole leaves the stem (within 3 mm of it).
         assert!((scores.true_branch_length - 0.4).abs() < 1e-9);
@@ -434,6 +503,22 @@ mod tests {
             "{rim_score:?}"
         );
         assert_eq!(rim_score.on_plant_length, 0.0, "{rim_score:?}");
+        // The length off the plant is the rim's, and it lies on the pot.
+        let off_plant = &scores.off_plant;
+        assert!(
+            (off_plant.on_pot - rim_length).abs() < 1e-6,
+            "{off_plant:?}"
+        );
+        assert_eq!(off_plant.on_leaves + off_plant.beside_stems, 0.0);
+        assert_eq!(off_plant.elsewhere, 0.0);
+        // Without the surfaces the same length is counted elsewhere.
+        let blind = skeleton_length_scores(
+            &gt,
+            &petioles,
+            std::slice::from_ref(&rim),
+            &TrueSurfaces::none(),
+        );
+        assert!((blind.off_plant.elsewhere - rim_length).abs() < 1e-6);
         let total: f64 = scores.predicted_branches.iter().map(|b| b.length).sum();
         assert!((total - scores.predicted_length).abs() < 1e-9);
     }

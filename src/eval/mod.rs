@@ -357,6 +357,29 @@ pub struct SkeletonLengthScores {
     pub precision: f64,
     /// Each predicted branch's part of `predicted_length`: which of them lie off the plant.
     pub predicted_branches: Vec<PredictedBranchScore>,
+    /// Where the predicted length off the plant lies (the rest of `precision`).
+    pub off_plant: OffPlantLength,
+}
+
+/// The predicted skeleton length off the plant (beyond every true branch's tolerance), by the
+/// nearest true surface within [`OffPlantLength::NEAR`] (model units of the truth): what a
+/// user would see drawn there. The four add up to `predicted_length` × (1 − `precision`).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct OffPlantLength {
+    /// Along a leaf blade: a petiole drawn on into its leaf, a branch on a leaf's edge.
+    pub on_leaves: f64,
+    /// Beside a true stem or petiole, but farther than the tolerance from its centreline.
+    pub beside_stems: f64,
+    /// On the pot or its soil.
+    pub on_pot: f64,
+    /// Near no sampled surface: floor, backdrop or air (straight bridges, halo).
+    pub elsewhere: f64,
+}
+
+impl OffPlantLength {
+    /// How near a true surface sample a piece of skeleton must lie to be counted on it
+    /// (metres; the surface samples lie about 2 mm apart).
+    pub const NEAR: f64 = 0.005;
 }
 
 /// One predicted branch's share of [`SkeletonLengthScores::precision`].
@@ -572,7 +595,8 @@ pub fn evaluate(
     };
     let skeleton = pred.skeleton.as_ref().map(|skeleton| {
         let petioles = geometry::petiole_ids(&gt.branches, &gt.leaves);
-        geometry::score_skeleton(&gt.branches, &petioles, skeleton)
+        let surfaces = geometry::TrueSurfaces::new(&gt.surface_samples);
+        geometry::score_skeleton(&gt.branches, &petioles, skeleton, &surfaces)
     });
     let leaflet_rachis: BTreeMap<i64, u32> = gt
         .leaves
@@ -728,6 +752,15 @@ impl EvalReport {
                     } else {
                         String::new()
                     }
+                );
+                let o = &k.length.off_plant;
+                let _ = writeln!(
+                    s,
+                    "off the plant on:  leaves {:.0} mm, beside stems {:.0} mm, pot {:.0} mm, elsewhere {:.0} mm",
+                    1e3 * o.on_leaves,
+                    1e3 * o.beside_stems,
+                    1e3 * o.on_pot,
+                    1e3 * o.elsewhere
                 );
             }
         }
