@@ -21,7 +21,9 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use crate::branch::BranchTree;
-use crate::branch::attach::{Attachment, PosedKind, attach_leaves};
+use crate::branch::attach::{
+    Attachment, BladeEnds, PosedKind, attach_leaves, end_branches_at_blades,
+};
 use crate::branch::compound::{
     CompoundLeaf, LeafOnBranch, compound_leaves as find_compound_leaves,
 };
@@ -431,6 +433,9 @@ pub fn fit_leaves(
 /// A plant model with how its leaves were attached.
 pub struct AssembledPlant {
     pub model: PlantModel,
+    /// The state's branches, ended where fitted leaves' blades begin
+    /// ([`end_branches_at_blades`]): the ones the model holds.
+    pub branches: BranchTree,
     pub attachment: Attachment,
     /// Leaflets on their rachis (see [`crate::branch::compound`]).
     pub compound_leaves: Vec<CompoundLeaf>,
@@ -438,11 +443,13 @@ pub struct AssembledPlant {
     pub attach_seconds: f64,
 }
 
-/// The plant model (seed 004 §7): the fitted leaves, the branches, a petiole from each leaf
-/// to its nearest branch, and posed leaves for small segments and leaf-at-tip branches.
+/// The plant model (seed 004 §7): the fitted leaves, the branches ended where a leaf's blade
+/// begins, a petiole from each leaf to its nearest branch, and posed leaves for small segments
+/// and leaf-at-tip branches.
 pub fn assemble_plant(state: &PlantState, leaves: &LeafReconstruction) -> AssembledPlant {
     let clock = Instant::now();
-    let branches = state.branches;
+    let (ended, blade_ends) = end_branches_at_blades(state.branches, leaves);
+    let branches = &ended;
     let positions = &state.segmentation.points.positions;
     let small_segments: Vec<(u32, Vec<nalgebra::Point3<f64>>)> = leaves
         .skipped
@@ -457,7 +464,8 @@ pub fn assemble_plant(state: &PlantState, leaves: &LeafReconstruction) -> Assemb
         })
         .collect();
     let up = state.segmentation.foreground.up;
-    let attachment = attach_leaves(branches, leaves, &small_segments, &up);
+    let mut attachment = attach_leaves(branches, leaves, &small_segments, &up);
+    attachment.blade_ends = blade_ends;
     let compound_leaves = find_compound_leaves(branches, &attachment.on_branches);
     let attach_seconds = clock.elapsed().as_secs_f64();
     // Tip leaves are numbered after every segment id.
@@ -514,6 +522,7 @@ pub fn assemble_plant(state: &PlantState, leaves: &LeafReconstruction) -> Assemb
     };
     AssembledPlant {
         model,
+        branches: ended,
         attachment,
         compound_leaves,
         attach_seconds,
@@ -588,6 +597,10 @@ pub struct AttachmentRecord {
     /// along it, and the leaf's base and tip.
     #[serde(default)]
     pub leaves: Vec<LeafOnBranch>,
+    /// Branch ends cut back where a fitted leaf's blade begins (the branches in
+    /// `skeleton.json` and the model are the cut ones).
+    #[serde(default)]
+    pub blade_ends: BladeEnds,
 }
 
 impl AttachmentRecord {
@@ -618,6 +631,7 @@ impl AttachmentRecord {
             average: attachment.average,
             touching: attachment.touching,
             leaves: attachment.on_branches.clone(),
+            blade_ends: attachment.blade_ends,
         }
     }
 }
@@ -730,19 +744,20 @@ pub fn write_plant(
     out: &Path,
 ) -> Result<ReconstructionReport, PipelineError> {
     std::fs::create_dir_all(out).map_err(|e| output_error(out, e))?;
-    let support = plant_branch_support(
-        state.segmentation,
-        state.labels,
-        state.branches,
-        &state.skeleton.options.tube,
-    );
-    files::write_skeleton(state.branches, &support, out)?;
     let AssembledPlant {
         model,
+        branches,
         attachment,
         compound_leaves,
         attach_seconds,
     } = assemble_plant(state, leaves);
+    let support = plant_branch_support(
+        state.segmentation,
+        state.labels,
+        &branches,
+        &state.skeleton.options.tube,
+    );
+    files::write_skeleton(&branches, &support, out)?;
     let clock = Instant::now();
     let export = model.export(out).map_err(|e| output_error(out, e))?;
     let mut boundaries = state.boundaries.clone();
@@ -797,7 +812,7 @@ pub fn write_plant(
             leaves_skipped: leaves.skipped.len(),
             gap_fills: leaves.gap_fills,
             gap_fills_on_leaves: leaves.gap_fills_on_leaves,
-            branches: state.branches.branches.len(),
+            branches: branches.branches.len(),
             petioles: attachment.petioles.len(),
             leaves_touching_branches: attachment.touching,
             leaves_posed: attachment.posed.len(),
