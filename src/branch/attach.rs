@@ -265,7 +265,7 @@ const ON_BLADE_SHARE: f64 = 0.05;
 /// Within this share of a leaf's length of its base a branch is where the leaf meets it, not
 /// on its blade.
 const BASE_SHARE: f64 = 0.1;
-/// Samples along a branch for [`end_branches_at_blades`], at most.
+/// Samples along each branch (equally spaced by arc length) for [`end_branches_at_blades`].
 const BLADE_SAMPLES: usize = 200;
 
 /// What [`end_branches_at_blades`] changed.
@@ -365,9 +365,7 @@ pub fn end_branches_at_blades(
         let (id, parent, cylinder) = (branch.id, branch.parent, branch.cylinder.clone());
         visited.insert(id);
         let length = cylinder.length();
-        let samples = cylinder
-            .skeleton
-            .sample_by_arc_length(BLADE_SAMPLES.min((length.max(0.0) * 1e4) as usize).max(8));
+        let samples = cylinder.skeleton.sample_by_arc_length(BLADE_SAMPLES);
         let last = samples.len() - 1;
         // The run of samples on blades that ends at the tip, or that ends short of it by at
         // most its blade's margin (a branch overshooting the blade's edge into its halo).
