@@ -326,28 +326,23 @@ pub fn end_branches_at_blades(
         .leaves
         .iter()
         .filter(|l| !l.fit.mesh.triangles.is_empty() && l.fit.length > 0.0)
-        .map(|l| {
+        .filter_map(|l| {
             let mesh = &l.fit.mesh;
-            let count = mesh.positions.len().max(1) as f32;
-            let centre = Point3::from(
-                mesh.positions
-                    .iter()
-                    .fold(nalgebra::Vector3::<f32>::zeros(), |a, p| a + p.coords)
-                    / count,
-            );
+            let (lo, hi) = mesh.bounds()?;
+            let centre = nalgebra::center(&lo, &hi);
             let radius = mesh
                 .positions
                 .iter()
                 .map(|p| (p - centre).norm())
                 .fold(0.0f32, f32::max);
-            Blade {
+            Some(Blade {
                 mesh,
                 centre,
                 radius,
                 base: Point3::from(l.fit.base),
                 near: ON_BLADE_SHARE * l.fit.length,
                 margin: BASE_SHARE * l.fit.length,
-            }
+            })
         })
         .collect();
     let mut tree = tree.clone();

@@ -266,12 +266,7 @@ pub fn classes(
             index
                 .as_ref()
                 .filter(|_| spacing > 0.0)
-                .and_then(|index| {
-                    index
-                        .nearest_k(p, std::num::NonZero::<usize>::MIN)
-                        .first()
-                        .copied()
-                })
+                .and_then(|index| index.nearest(p))
                 .filter(|nearest| nearest.distance() <= EDGE_SPACINGS * spacing)
                 .map_or(PointClass::Outlier, |nearest| classes[nearest.index])
         })
