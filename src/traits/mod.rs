@@ -354,7 +354,7 @@ fn across_quadratic(
 }
 
 /// Measures one leaf. The midrib follows the leaf's main axis: the area-weighted centroids of
-/// 24 slices across it, from the extreme vertex at the base end to the one at the tip end.
+/// 16 slices across it, from the extreme vertex at the base end to the one at the tip end.
 /// The base end is the one nearer `base_world` (or, without it, nearer `axis_world`, a point
 /// on the plant's axis). `None` for a mesh without area.
 pub fn leaf_traits(
