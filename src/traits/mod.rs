@@ -1000,6 +1000,51 @@ mod tests {
         assert!((t.length - length).abs() < 0.03 * length, "{t:?}");
     }
 
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(24))]
+        /// A leaf's size does not depend on where it is, how it is turned or whether it is
+        /// seen in a mirror: the generator's leaves, moved rigidly (and mirrored), measure
+        /// the same length, width, area and perimeter.
+        #[test]
+        fn a_leaf_measures_the_same_wherever_it_is_and_however_it_is_turned(
+            leaf_index in 0usize..11,
+            axis in (-1.0f64..1.0, -1.0f64..1.0, 0.1f64..1.0),
+            angle in 0.0f64..std::f64::consts::TAU,
+            shift in (-1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0),
+            mirrored in proptest::bool::ANY,
+        ) {
+            let plant = crate::synth::plant::generate_plant(crate::synth::Preset::Broadleaf, 1);
+            let leaf = &plant.leaves[leaf_index % plant.leaves.len()];
+            let base = Point3::from(leaf.world_from_leaf.translation.vector);
+            let rotation = nalgebra::Rotation3::from_axis_angle(
+                &nalgebra::Unit::new_normalize(Vector3::new(axis.0, axis.1, axis.2)),
+                angle,
+            );
+            let shift = Vector3::new(shift.0, shift.1, shift.2);
+            let mirror = if mirrored { -1.0 } else { 1.0 };
+            let moved = |p: &Point3<f64>| {
+                let q = rotation * p + shift;
+                Point3::new(mirror * q.x, q.y, q.z)
+            };
+            let mut mesh = leaf.mesh.clone();
+            for p in &mut mesh.positions {
+                *p = moved(&p.cast::<f64>()).cast::<f32>();
+            }
+            let up = Vector3::z();
+            let before = leaf_traits(&leaf.mesh, Some(base), &Point3::origin(), &up).unwrap();
+            let after = leaf_traits(&mesh, Some(moved(&base)), &moved(&Point3::origin()), &up)
+                .unwrap();
+            for (name, a, b) in [
+                ("length", before.length, after.length),
+                ("width", before.width, after.width),
+                ("area", before.area, after.area),
+                ("perimeter", before.perimeter, after.perimeter),
+            ] {
+                proptest::prop_assert!((a - b).abs() <= 0.005 * a, "{name}: {a} vs {b}");
+            }
+        }
+    }
+
     /// The measurement on the synthetic generator's leaves (bent, cupped, of every shape)
     /// against the lengths it built them with.
     #[test]
