@@ -948,6 +948,17 @@ mod tests {
         assert!(t.deformation < 1e-6, "{t:?}");
     }
 
+    /// A leaf's traits with its base at the origin, z up.
+    fn measured_from_origin(mesh: &TriMesh) -> LeafTraits {
+        leaf_traits(
+            mesh,
+            Some(Point3::origin()),
+            &Point3::origin(),
+            &Vector3::z(),
+        )
+        .unwrap()
+    }
+
     #[test]
     fn a_bent_leaf_is_measured_along_its_midrib_and_is_deformed() {
         // A leaf bent in a quarter circle of radius r: midrib length πr/2, chord r√2.
@@ -958,13 +969,7 @@ mod tests {
             p.x = (r * angle.sin()) as f32;
             p.z = (r * (1.0 - angle.cos())) as f32;
         }
-        let t = leaf_traits(
-            &mesh,
-            Some(Point3::origin()),
-            &Point3::origin(),
-            &Vector3::z(),
-        )
-        .unwrap();
+        let t = measured_from_origin(&mesh);
         let arc = r * std::f64::consts::FRAC_PI_2;
         assert!((t.length - arc).abs() < 0.01 * arc, "{} vs {arc}", t.length);
         assert!(t.deformation > 0.005, "{t:?}");
@@ -990,13 +995,7 @@ mod tests {
             };
             p.y = (across * side) as f32;
         }
-        let t = leaf_traits(
-            &mesh,
-            Some(Point3::origin()),
-            &Point3::origin(),
-            &Vector3::z(),
-        )
-        .unwrap();
+        let t = measured_from_origin(&mesh);
         assert!((t.length - length).abs() < 0.03 * length, "{t:?}");
     }
 
