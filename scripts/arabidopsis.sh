@@ -14,4 +14,7 @@ mkdir -p "$work"
 cargo build --release --quiet --manifest-path "$root/Cargo.toml"
 frond="$root/target/release/frond"
 [ -f "$work/out/report.json" ] || "$frond" reconstruct "$data/images" --out "$work/out"
+echo "== every organ on the main stem (side branches and the leaves attached to it)"
 "$frond" phyllotaxis "$work/out" --measures "$data/measures.json" --scale-orbit 0.3
+echo "== side branches only: fruits, pedicels and shoots, what measures.json counts (no leaves)"
+"$frond" phyllotaxis "$work/out" --measures "$data/measures.json" --scale-orbit 0.3 --organs branches

@@ -587,6 +587,27 @@ fn the_stem_sequence_is_aligned_with_the_truths() {
     let organs = sequence["organs"].as_array().unwrap().len();
     assert_eq!(angles.len() + 1, organs);
     assert!(organs >= 3, "{sequence}");
+    // The truth's leaves hang from their petioles, none from the stem: its branches alone make
+    // the same sequence, and its leaves none.
+    let branches = cargo_bin_cmd!("frond")
+        .args(["phyllotaxis", "--truth", "--json", "--organs", "branches"])
+        .arg(dataset())
+        .output()
+        .unwrap();
+    assert!(branches.status.success(), "{branches:?}");
+    let branches: Value = serde_json::from_slice(&branches.stdout).unwrap();
+    assert_eq!(branches["organs"], "branches");
+    assert_eq!(&branches["sequence"], sequence);
+    let leaves = cargo_bin_cmd!("frond")
+        .args(["phyllotaxis", "--truth", "--organs", "leaves"])
+        .arg(dataset())
+        .output()
+        .unwrap();
+    let message = String::from_utf8_lossy(&leaves.stderr);
+    assert!(
+        !leaves.status.success() && message.contains("of the kind asked for"),
+        "{message}"
+    );
     let dir = tempfile::tempdir().unwrap();
     let measures = dir.path().join("measures.json");
     std::fs::write(

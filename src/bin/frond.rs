@@ -395,6 +395,10 @@ enum Command {
         /// instead of a reconstruction.
         #[arg(long, conflicts_with_all = ["scale", "scale_from", "scale_checkerboard", "scale_orbit"])]
         truth: bool,
+        /// Which organs on the main stem make the sequence: `branches` compares with measures
+        /// of fruits along an inflorescence (ROMI's), which count no leaves.
+        #[arg(long, value_enum, default_value = "all")]
+        organs: SequenceOrgansArg,
         #[arg(long)]
         json: bool,
     },
@@ -514,6 +518,7 @@ fn phyllotaxis(
     measures: Option<&Path>,
     scale: &ScaleArgs,
     truth: bool,
+    which: frond::traits::phyllotaxis::SequenceOrgans,
     json: bool,
 ) -> Result<()> {
     let name = plant_name(reconstruction);
@@ -528,9 +533,9 @@ fn phyllotaxis(
             .with_context(|| format!("reading the reconstruction {}", reconstruction.display()))?;
         (organs, scale.scale(reconstruction)?)
     };
-    let Some(sequence) = frond::traits::phyllotaxis::stem_sequence(&organs) else {
+    let Some(sequence) = frond::traits::phyllotaxis::stem_sequence_of(&organs, which) else {
         bail!(
-            "{}: no main stem with at least two organs on it",
+            "{}: no main stem with at least two organs of the kind asked for on it",
             reconstruction.display()
         );
     };
@@ -556,6 +561,7 @@ fn phyllotaxis(
             "{}",
             serde_json::to_string_pretty(&serde_json::json!({
                 "scale": scale,
+                "organs": which,
                 "sequence": sequence,
                 "comparison": comparison,
             }))?
@@ -631,6 +637,26 @@ fn traits(
     frond::traits::io::write_traits(dir, &table)
         .with_context(|| format!("writing traits into {}", dir.display()))?;
     Ok(table)
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum SequenceOrgansArg {
+    /// Child branches and leaves attached to the stem directly.
+    All,
+    /// Child branches only (fruits, pedicels, side shoots).
+    Branches,
+    /// Leaves attached to the stem directly only.
+    Leaves,
+}
+
+impl From<SequenceOrgansArg> for frond::traits::phyllotaxis::SequenceOrgans {
+    fn from(arg: SequenceOrgansArg) -> Self {
+        match arg {
+            SequenceOrgansArg::All => Self::All,
+            SequenceOrgansArg::Branches => Self::Branches,
+            SequenceOrgansArg::Leaves => Self::Leaves,
+        }
+    }
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -2218,8 +2244,16 @@ fn main() -> Result<()> {
             measures,
             scale,
             truth,
+            organs,
             json,
-        } => phyllotaxis(reconstruction, measures.as_deref(), scale, *truth, *json),
+        } => phyllotaxis(
+            reconstruction,
+            measures.as_deref(),
+            scale,
+            *truth,
+            (*organs).into(),
+            *json,
+        ),
         Command::Traits {
             reconstruction,
             plant,

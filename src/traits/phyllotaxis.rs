@@ -116,9 +116,40 @@ pub(crate) fn interval(axis: &SkeletonRecord, a: &Inserted, b: &Inserted) -> (f6
     (internode, angle)
 }
 
+/// Which organs on the main stem make its sequence.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SequenceOrgans {
+    /// Child branches and leaves attached to the stem directly.
+    #[default]
+    All,
+    /// Child branches only: the stem's fruits, pedicels and side shoots, what ROMI's manual
+    /// Arabidopsis measures count (the angle and internode between successive fruits, no
+    /// leaves; a rosette's leaves all sit at the stem's foot).
+    Branches,
+    /// Leaves attached to the stem directly only.
+    Leaves,
+}
+
+impl SequenceOrgans {
+    fn takes(self, kind: OrganKind) -> bool {
+        match self {
+            SequenceOrgans::All => true,
+            SequenceOrgans::Branches => kind == OrganKind::Branch,
+            SequenceOrgans::Leaves => kind == OrganKind::Leaf,
+        }
+    }
+}
+
 /// The organ sequence along the main stem; `None` without a stem of positive length or with
 /// fewer than two organs on it whose direction is known.
 pub fn stem_sequence(organs: &PlantOrgans) -> Option<StemSequence> {
+    stem_sequence_of(organs, SequenceOrgans::All)
+}
+
+/// The sequence of the organs of the kinds `which` takes along the main stem; `None` as for
+/// [`stem_sequence`].
+pub fn stem_sequence_of(organs: &PlantOrgans, which: SequenceOrgans) -> Option<StemSequence> {
     let stem = main_stem(&organs.branches)?;
     let length = branch_length(stem);
     if !positive(length) {
@@ -129,10 +160,11 @@ pub fn stem_sequence(organs: &PlantOrgans) -> Option<StemSequence> {
         .try_normalize(1e-12)
         .unwrap_or_else(Vector3::z);
     let stem_base = Point3::from(*stem.centerline.first()?);
-    let inserted = inserted_on(stem, organs, |leaf| {
+    let mut inserted = inserted_on(stem, organs, |leaf| {
         let t = leaf_traits(&leaf.mesh, leaf.base_world, &stem_base, &up)?;
         (t.tip_world - t.base_world).try_normalize(1e-15)
     });
+    inserted.retain(|o| which.takes(o.kind));
     if inserted.len() < 2 {
         return None;
     }
@@ -263,6 +295,61 @@ mod tests {
             ..organs
         };
         assert!(stem_sequence(&organs).is_none());
+    }
+
+    #[test]
+    fn the_sequence_takes_the_organs_of_the_kinds_asked_for() {
+        // A vertical stem 1 long: leaves at 0.1 (towards −x) and 0.5 (−y), branches at 0.3
+        // (+x) and 0.7 (+y).
+        let stem: Vec<[f64; 3]> = vec![[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
+        let leaf = |id: u32, z: f64, along: Vector3<f64>| crate::traits::LeafOrgan {
+            id,
+            mesh: crate::traits::tests::rectangle(
+                Point3::new(0.0, 0.0, z),
+                along,
+                Vector3::z(),
+                0.2,
+                0.05,
+            ),
+            base_world: Some(Point3::new(0.0, 0.0, z)),
+            branch: Some((0, z)),
+            synthesized: false,
+            compound_leaf: None,
+        };
+        let organs = PlantOrgans {
+            plant: "kinds".into(),
+            up_world: Vector3::z(),
+            leaves: vec![leaf(10, 0.1, -Vector3::x()), leaf(11, 0.5, -Vector3::y())],
+            branches: vec![
+                branch(0, None, 0.0, stem),
+                branch(1, Some(0), 0.3, vec![[0.0, 0.0, 0.3], [0.2, 0.0, 0.4]]),
+                branch(2, Some(0), 0.7, vec![[0.0, 0.0, 0.7], [0.0, 0.2, 0.8]]),
+            ],
+        };
+        let ids = |s: &StemSequence| s.organs.iter().map(|o| o.id).collect::<Vec<_>>();
+        let all = stem_sequence_of(&organs, SequenceOrgans::All).unwrap();
+        assert_eq!(ids(&all), vec![10, 1, 11, 2]);
+        assert_eq!(all, stem_sequence(&organs).unwrap());
+        for (which, expected, kind) in [
+            (SequenceOrgans::Branches, vec![1, 2], OrganKind::Branch),
+            (SequenceOrgans::Leaves, vec![10, 11], OrganKind::Leaf),
+        ] {
+            let sequence = stem_sequence_of(&organs, which).unwrap();
+            assert_eq!(ids(&sequence), expected);
+            assert!(sequence.organs.iter().all(|o| o.kind == kind));
+            // Successive organs of the kind, 0.4 apart and a quarter turn counter-clockwise.
+            assert_eq!(sequence.internodes.len(), 1);
+            assert!((sequence.internodes[0] - 0.4).abs() < 1e-9, "{sequence:?}");
+            let angle = sequence.angles_deg[0].unwrap();
+            assert!((angle - 90.0).abs() < 1e-6, "{which:?}: {angle}");
+        }
+        // One branch alone makes no sequence, whatever the leaves.
+        let one_branch = PlantOrgans {
+            branches: organs.branches[..2].to_vec(),
+            ..organs.clone()
+        };
+        assert!(stem_sequence_of(&one_branch, SequenceOrgans::Branches).is_none());
+        assert!(stem_sequence_of(&one_branch, SequenceOrgans::All).is_some());
     }
 
     #[test]
