@@ -141,11 +141,11 @@ pub enum PlantBase {
     /// vertical axis): the tree grows from the lowest points near that axis, and a stem that
     /// does not reach down to the point is drawn on to it.
     Stem(Point3<f64>),
-    /// Only a point of the soil line, under the point the cameras look at (no pot to say
-    /// where the stem stands): a plant placed off that axis, or leaning, has its stem's foot
-    /// elsewhere, and the points nearest the axis may be its top. The tree grows from the
-    /// point of the plant nearest this one, and a stem that does not reach the soil line is
-    /// drawn straight down to it.
+    /// Only a point of the soil line (no pot to say where the stem stands), on an axis fitted
+    /// to the plant's points (`branch::plant::plant_axis`), which need not be where the
+    /// cameras look nor upright; the fit can miss the foot of a plant that is not one stem.
+    /// The tree grows from the point of the plant nearest this one, and a stem that does not
+    /// reach the soil line is drawn straight down to it.
     SoilLine(Point3<f64>),
 }
 
