@@ -1477,7 +1477,55 @@ fn closest_crossing(
             });
         }
     }
+    // Between samples: where the line passes closest to the axis polyline next to the best
+    // sample (samples are 1/127 of the axis apart, too coarse for insertion heights).
+    if let Some(b) = best.as_mut() {
+        let i = (b.fraction * last).round() as usize;
+        let refined = [
+            i.checked_sub(1).map(|h| (h, i)),
+            (i + 1 < samples.len()).then_some((i, i + 1)),
+        ]
+        .into_iter()
+        .flatten()
+        .map(|(h, k)| {
+            let (u, distance) =
+                line_segment_closest(origin, direction, &samples[h].0, &samples[k].0);
+            (h, u, distance)
+        })
+        .min_by(|x, y| x.2.total_cmp(&y.2));
+        if let Some((h, u, _)) = refined {
+            b.fraction = ((h as f64 + u) / last).clamp(0.0, 1.0);
+            b.point = samples[h].0 + (samples[h + 1].0 - samples[h].0) * u;
+        }
+    }
     best
+}
+
+/// The closest approach of the line `origin + s·direction` and the segment `ab`: the
+/// segment's parameter `u` ∈ [0, 1] and the distance there.
+fn line_segment_closest(
+    origin: &Point3<f64>,
+    direction: &Vector3<f64>,
+    a: &Point3<f64>,
+    b: &Point3<f64>,
+) -> (f64, f64) {
+    let d = direction
+        .try_normalize(1e-15)
+        .unwrap_or_else(Vector3::zeros);
+    let e = b - a;
+    let w = a - origin;
+    // Minimise |w + u·e − s·d|² over s and u: the normal equations of the 2×2 system.
+    let (dd, de, ee) = (d.dot(&d), d.dot(&e), e.dot(&e));
+    let (dw, ew) = (d.dot(&w), e.dot(&w));
+    let denominator = dd * ee - de * de;
+    let u = if denominator.abs() < 1e-18 * ee.max(1e-300) {
+        0.0
+    } else {
+        ((de * dw - dd * ew) / denominator).clamp(0.0, 1.0)
+    };
+    let q = a + e * u;
+    let off_line = (q - origin) - d * (q - origin).dot(&d);
+    (u, off_line.norm())
 }
 
 /// Branches leaving a common parent together (petioles from a crown, twigs from a whorl)
@@ -1497,7 +1545,8 @@ fn sibling_of(
     let grandparent = parent.parent?;
     let axis = &parent.cylinder.skeleton;
     let fraction = attachment.map_or(0.0, |a| attachment_fraction(parent, &a));
-    let chord = axis.point_at_fraction(fraction) - axis.point_at_fraction(0.0);
+    let split = attachment.unwrap_or_else(|| axis.point_at_fraction(0.0));
+    let chord = split - axis.point_at_fraction(0.0);
     let direction = if chord.norm() >= length {
         chord.normalize()
     } else {
@@ -1548,16 +1597,12 @@ fn support(
     (total > 0).then(|| supported as f64 / total as f64)
 }
 
-/// Arc-length fraction of the point of a branch's skeleton nearest to `p`.
+/// Arc-length fraction of the point of a branch's skeleton nearest to `p`: the foot of the
+/// perpendicular on the curve's dense arc-length polyline, not the nearest of a few samples
+/// (64 samples put every insertion on a 1/63 grid of the parent: 6.9 mm on a 44 cm stem,
+/// larger than the internodes phyllotaxis measures).
 fn attachment_fraction(branch: &Branch, p: &Point3<f64>) -> f64 {
-    let samples = branch.cylinder.skeleton.sample_by_arc_length(64);
-    let nearest = samples
-        .iter()
-        .enumerate()
-        .min_by(|a, b| (a.1.0 - p).norm().total_cmp(&(b.1.0 - p).norm()))
-        .map(|(i, _)| i)
-        .unwrap_or(0);
-    nearest as f64 / (samples.len().max(2) - 1) as f64
+    branch.cylinder.skeleton.closest_fraction(p).0
 }
 
 /// A branch through `polyline` (attachment point first for side branches), its radius fitted
@@ -1689,6 +1734,48 @@ mod tests {
             leaf_at_tip: false,
         };
         (axis, stem)
+    }
+
+    #[test]
+    fn insertions_are_placed_between_the_parents_samples() {
+        // A 0.44 m stem: its 64 samples are 6.98 mm apart; insertions 1 mm apart must come
+        // out 1 mm apart, from a point beside the axis and from a line crossing it.
+        let (_, stem) = vertical_stem(0.44, 0.002);
+        for k in 0..20 {
+            let height = 0.2 + 0.001 * k as f64;
+            let beside = Point3::new(0.004, -0.001, height);
+            let fraction = attachment_fraction(&stem, &beside);
+            assert!((fraction * 0.44 - height).abs() < 1e-5, "{k}: {fraction}");
+            // A branch whose base lies 10 mm out, pointing back at the stem 30° downwards.
+            let origin = Point3::new(0.01, 0.0, height + 0.01 * 30f64.to_radians().tan());
+            let direction = Vector3::new(-1.0, 0.0, -(30f64.to_radians().tan())).normalize();
+            let crossing = closest_crossing(&stem, &origin, &direction, 0.05)
+                .expect("the line passes through the axis");
+            assert!(
+                (crossing.fraction * 0.44 - height).abs() < 1e-5,
+                "{k}: {}",
+                crossing.fraction
+            );
+            assert!((crossing.point.z - height).abs() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn the_closest_approach_of_a_line_and_a_segment() {
+        let a = Point3::new(0.0, 0.0, 0.0);
+        let b = Point3::new(0.0, 0.0, 2.0);
+        // A horizontal line 0.5 off the segment's axis, at height 1.5.
+        let (u, distance) = line_segment_closest(
+            &Point3::new(-3.0, 0.5, 1.5),
+            &Vector3::new(2.0, 0.0, 0.0),
+            &a,
+            &b,
+        );
+        assert!((u - 0.75).abs() < 1e-12 && (distance - 0.5).abs() < 1e-12);
+        // Passing above the segment's end: clamped to it.
+        let (u, distance) =
+            line_segment_closest(&Point3::new(-3.0, 0.0, 3.0), &Vector3::x(), &a, &b);
+        assert!((u - 1.0).abs() < 1e-12 && (distance - 1.0).abs() < 1e-12);
     }
 
     /// The default skeleton of points around a vertical axis through the origin.
