@@ -22,7 +22,8 @@ pub const MIN_POT_POINTS: usize = 50;
 
 /// A pot from the points labelled pot and the points that may lie on its wall (`voters`),
 /// given the up direction and a point near the pot's axis; `None` below [`MIN_POT_POINTS`]
-/// pot points or where the plant goes on inside the pot below its rim ([`MAX_INSIDE_DEPTH`]).
+/// pot points, where the plant goes on inside the pot below its rim ([`MAX_INSIDE_DEPTH`]), or
+/// where the pot points span more than [`MAX_HEIGHT_RADII`] in height.
 /// The rim is at the 95th percentile of the pot points' heights and the pot's lowest points at
 /// the 5th. The axis is the centre of the wall's concentric circles (one per
 /// height band, [`wall_band`]) voted for by the voters ([`robust_circle_centre`]; an orbit sees
@@ -65,12 +66,22 @@ pub fn pot_from_points(
         radius: radii[radii.len() / 2],
     };
     let depth = inside_depth(&shape, (1.0 - WALL_BOTTOM) * (rim - low), voters, up);
-    tracing::debug!(?shape, inside_depth = ?depth, "pot from its points");
-    if depth.is_some_and(|depth| depth > MAX_INSIDE_DEPTH) {
+    tracing::debug!(?shape, height = rim - low, inside_depth = ?depth, "pot from its points");
+    if depth.is_some_and(|depth| depth > MAX_INSIDE_DEPTH)
+        || rim - low > MAX_HEIGHT_RADII * shape.radius
+    {
         return None;
     }
     Some(shape)
 }
+
+/// A pot is squat: its points span at most this many of its radii in height (1.5 diameters;
+/// the synthetic pots are 1.0–1.7 radii tall, nursery pots about 2.5). Taller, the "pot" is
+/// pieces of the plant at one distance from the cameras' axis: on the real Arabidopsis, with a
+/// pot test that no longer took its rosette's leaves for pot (tried, not kept), the stereo halo
+/// of its lower stem made one 4.4 radii tall (96 mm, radius 22 mm) with its rim 10 cm up the
+/// stem, and the stem was cut there.
+const MAX_HEIGHT_RADII: f64 = 3.0;
 
 /// The points inside a pot are those within this share of its radius from its axis.
 const INSIDE_SHARE: f64 = 0.5;
@@ -360,6 +371,36 @@ mod tests {
             pot_from_points(&wall, &voters(stem(0.0)), &up, &centre),
             None
         );
+    }
+
+    #[test]
+    fn a_pot_taller_than_three_radii_is_no_pot() {
+        let up = Vector3::z();
+        let mut rng = crate::util::rng::Rng::seed_from(5);
+        // Walls of radius 0.03 around a stem, with soil at their top: 1.5 radii tall is a pot,
+        // 4 radii tall (pieces of a plant at one distance from the cameras' axis) is not.
+        let wall = |height: f64, rng: &mut crate::util::rng::Rng| -> Vec<Point3<f64>> {
+            (0..400)
+                .map(|_| {
+                    let a = rng.range(0.0, std::f64::consts::TAU);
+                    Point3::new(0.03 * a.cos(), 0.03 * a.sin(), rng.range(0.0, height))
+                })
+                .collect()
+        };
+        let centre = Point3::new(0.0, 0.0, 0.3);
+        for (height, is_pot) in [(0.045, true), (0.12, false)] {
+            let pot = wall(height, &mut rng);
+            let voters: Vec<Point3<f64>> = pot
+                .iter()
+                .copied()
+                .chain((0..200).map(|k| {
+                    let a = k as f64 * 0.7;
+                    Point3::new(0.02 * a.cos(), 0.02 * a.sin(), height - 0.001)
+                }))
+                .collect();
+            let found = pot_from_points(&pot, &voters, &up, &centre);
+            assert_eq!(found.is_some(), is_pot, "{height}: {found:?}");
+        }
     }
 
     /// `n` points of soil inside a rim of radius 0.07, at z = 0.11 ± 2 mm.
