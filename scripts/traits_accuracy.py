@@ -73,7 +73,7 @@ def main():
     seeds = [int(s) for s in args.seeds.split(",")]
     rows, summary = [], []
     for mode in args.modes.split(","):
-        pooled = {"area": [], "length": [], "inclination": [], "branch": []}
+        pooled = {"area": [], "length": [], "inclination": [], "branch": [], "insertion": []}
         for seed in seeds:
             accuracy, seconds, peak = one(mode, args.preset, seed, args.out)
             leaves = accuracy["leaves"]
@@ -81,7 +81,9 @@ def main():
             length = [l["length_relative_error"] for l in leaves]
             inclination = [l["inclination_error_deg"] for l in leaves]
             branch = [b["length_relative_error"] for b in accuracy["branches"]]
-            for key, values in zip(pooled, [area, length, inclination, branch]):
+            insertion = [b["insertion_height_error"] for b in accuracy["branches"]
+                         if b.get("insertion_height_error") is not None]
+            for key, values in zip(pooled, [area, length, inclination, branch, insertion]):
                 pooled[key] += values
             record = {
                 "mode": mode, "preset": args.preset, "seed": seed,
@@ -89,7 +91,7 @@ def main():
                 "branches": f"{len(branch)}/{accuracy['gt_branches']}",
                 "area": median(area), "length": median(length),
                 "inclination": median(inclination), "branch_length": median(branch),
-                "seconds": seconds, "peak_kb": peak,
+                "insertion_mm": 1000 * median(insertion), "seconds": seconds, "peak_kb": peak,
             }
             summary.append(record)
             rows.append(record)
@@ -99,16 +101,17 @@ def main():
             "leaves": str(len(pooled["area"])), "branches": str(len(pooled["branch"])),
             "area": median(pooled["area"]), "length": median(pooled["length"]),
             "inclination": median(pooled["inclination"]),
-            "branch_length": median(pooled["branch"]), "seconds": None, "peak_kb": None,
+            "branch_length": median(pooled["branch"]),
+            "insertion_mm": 1000 * median(pooled["insertion"]), "seconds": None, "peak_kb": None,
         })
     with open(os.path.join(args.out, "summary.json"), "w") as f:
         json.dump(rows, f, indent=2)
-    print("| input | seed | leaves compared | leaf area | leaf length | leaf inclination | branches matched | branch length |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| input | seed | leaves compared | leaf area | leaf length | leaf inclination | branches matched | branch length | branch insertion height |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['mode']} | {r['seed']} | {r['leaves']} | {100 * r['area']:.1f} % | "
               f"{100 * r['length']:.1f} % | {r['inclination']:.1f}° | {r['branches']} | "
-              f"{100 * r['branch_length']:.1f} % |")
+              f"{100 * r['branch_length']:.1f} % | {r['insertion_mm']:.1f} mm |")
 
 
 if __name__ == "__main__":

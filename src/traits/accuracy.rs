@@ -37,6 +37,12 @@ pub struct BranchComparison {
     pub gt_length: f64,
     pub length: f64,
     pub length_relative_error: f64,
+    /// True and reconstructed insertion height (the base's height above each plant's own
+    /// base, truth's units) and their absolute difference; `None` for a stem (a root branch
+    /// in either) or where either has no base.
+    pub gt_insertion_height: Option<f64>,
+    pub insertion_height: Option<f64>,
+    pub insertion_height_error: Option<f64>,
     /// Symmetric mean centreline distance / the tolerance it was matched under.
     pub distance: f64,
 }
@@ -52,6 +58,8 @@ pub struct TraitAccuracy {
     pub gt_branches: usize,
     pub branches: Vec<BranchComparison>,
     pub branch_length_relative_error: Summary,
+    /// Absolute insertion height error of the matched side branches (truth's units).
+    pub branch_insertion_height_error: Summary,
     pub plant_height_relative_error: Option<f64>,
     pub total_leaf_area_relative_error: Option<f64>,
 }
@@ -178,12 +186,23 @@ pub fn compare(
         let pl = table
             .value(&branch_organ_id(p.id), "length")
             .unwrap_or(branch_length(p));
+        // A stem's insertion height is 0 by definition (the plant's base is its foot).
+        let inserted = g.parent.is_some() && p.parent.is_some();
+        let gh = gt_table
+            .value(&branch_organ_id(g.id), "insertion_height")
+            .filter(|_| inserted);
+        let ph = table
+            .value(&branch_organ_id(p.id), "insertion_height")
+            .filter(|_| inserted);
         branches.push(BranchComparison {
             gt_branch: g.id,
             branch: p.id,
             gt_length: gl,
             length: pl,
             length_relative_error: (pl - gl).abs() / gl,
+            gt_insertion_height: gh,
+            insertion_height: ph,
+            insertion_height_error: gh.zip(ph).map(|(g, p)| (p - g).abs()),
             distance: d,
         });
     }
@@ -204,6 +223,12 @@ pub fn compare(
             &branches
                 .iter()
                 .map(|b| b.length_relative_error)
+                .collect::<Vec<_>>(),
+        ),
+        branch_insertion_height_error: Summary::of(
+            &branches
+                .iter()
+                .filter_map(|b| b.insertion_height_error)
                 .collect::<Vec<_>>(),
         ),
         plant_height_relative_error: relative("height"),
@@ -299,11 +324,12 @@ impl TraitAccuracy {
             median(&self.leaf_inclination_error_deg)
         ));
         text.push_str(&format!(
-            "branches matched: {} of {} true branches; median length error {} (relative)
+            "branches matched: {} of {} true branches; median length error {} (relative), insertion height error {} (truth's units)
 ",
             self.branches.len(),
             self.gt_branches,
-            median(&self.branch_length_relative_error)
+            median(&self.branch_length_relative_error),
+            median(&self.branch_insertion_height_error)
         ));
         let optional = |v: Option<f64>| v.map_or("-".to_owned(), |v| format!("{v:.4}"));
         text.push_str(&format!(
@@ -384,5 +410,43 @@ mod tests {
         let (accuracy, _, _) = compare(&truth, &far, &[], 0.3);
         assert!(accuracy.branches.is_empty());
         assert_eq!(accuracy.leaf_area_relative_error.count, 0);
+    }
+
+    #[test]
+    fn a_branch_inserted_higher_shows_its_insertion_height_error() {
+        // A side branch leaving the stem at 0.1 in the truth and 15 mm higher in the
+        // prediction, otherwise alike: its insertion height is 15 mm off, the stem's 0.
+        let with_side = |base: f64| {
+            let mut organs = organs(1.0, 0.0);
+            organs.branches.push(SkeletonRecord {
+                id: 4,
+                parent: Some(3),
+                parent_fraction: base / 0.3,
+                control_points: Vec::new(),
+                radius_start: 0.01,
+                radius_end: 0.005,
+                length: 0.0,
+                centerline: vec![[0.0, 0.0, base], [0.1, 0.0, base + 0.05]],
+                observed_length: None,
+                bridged_length: None,
+            });
+            organs
+        };
+        let (accuracy, _, _) = compare(&with_side(0.1), &with_side(0.115), &[], 0.3);
+        assert_eq!(accuracy.branches.len(), 2, "{:?}", accuracy.branches);
+        let side = accuracy.branches.iter().find(|b| b.gt_branch == 4).unwrap();
+        assert_eq!(side.branch, 4);
+        assert!(
+            (side.insertion_height_error.unwrap() - 0.015).abs() < 1e-9,
+            "{side:?}"
+        );
+        assert!(
+            (side.insertion_height.unwrap() - 0.115).abs() < 1e-9,
+            "{side:?}"
+        );
+        // The stems are matched, with no insertion height.
+        let stem = accuracy.branches.iter().find(|b| b.gt_branch == 3).unwrap();
+        assert_eq!(stem.insertion_height_error, None, "{stem:?}");
+        assert_eq!(accuracy.branch_insertion_height_error.count, 1);
     }
 }
