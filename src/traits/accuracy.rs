@@ -415,7 +415,7 @@ mod tests {
     #[test]
     fn a_branch_inserted_higher_shows_its_insertion_height_error() {
         // A side branch leaving the stem at 0.1 in the truth and 15 mm higher in the
-        // prediction, otherwise alike: its insertion height is 15 mm off, the stem's 0.
+        // prediction, otherwise alike: its insertion height is 15 mm off (stems have none).
         let with_side = |base: f64| {
             let mut organs = organs(1.0, 0.0);
             organs.branches.push(SkeletonRecord {
