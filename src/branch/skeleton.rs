@@ -1460,7 +1460,8 @@ fn closest_crossing(
     let crossing_sine = 5f64.to_radians().sin();
     let samples = branch.cylinder.skeleton.sample_by_arc_length(128);
     let last = (samples.len().max(2) - 1) as f64;
-    let mut best: Option<Crossing> = None;
+    // The best crossing and the index of its sample.
+    let mut best: Option<(Crossing, usize)> = None;
     for (i, (point, tangent)) in samples.iter().enumerate() {
         let along = (point - origin).dot(direction);
         if along < 0.0 || along > reach || direction.cross(tangent).norm() < crossing_sine {
@@ -1469,36 +1470,34 @@ fn closest_crossing(
         let fraction = i as f64 / last;
         let miss = (point - (origin + direction * along)).norm()
             / branch.cylinder.radius_at(fraction).max(1e-12);
-        if miss <= REACH_RADII && best.as_ref().is_none_or(|b| miss < b.miss) {
-            best = Some(Crossing {
+        if miss <= REACH_RADII && best.as_ref().is_none_or(|b| miss < b.0.miss) {
+            let crossing = Crossing {
                 miss,
                 fraction,
                 point: *point,
-            });
+            };
+            best = Some((crossing, i));
         }
     }
     // Between samples: where the line passes closest to the axis polyline next to the best
     // sample (samples are 1/127 of the axis apart, too coarse for insertion heights).
-    if let Some(b) = best.as_mut() {
-        let i = (b.fraction * last).round() as usize;
-        let refined = [
-            i.checked_sub(1).map(|h| (h, i)),
-            (i + 1 < samples.len()).then_some((i, i + 1)),
-        ]
-        .into_iter()
-        .flatten()
-        .map(|(h, k)| {
-            let (u, distance) =
-                line_segment_closest(origin, direction, &samples[h].0, &samples[k].0);
-            (h, u, distance)
-        })
-        .min_by(|x, y| x.2.total_cmp(&y.2));
-        if let Some((h, u, _)) = refined {
-            b.fraction = ((h as f64 + u) / last).clamp(0.0, 1.0);
-            b.point = samples[h].0 + (samples[h + 1].0 - samples[h].0) * u;
-        }
+    let (mut b, i) = best?;
+    let refined = [
+        i.checked_sub(1).map(|h| (h, i)),
+        (i + 1 < samples.len()).then_some((i, i + 1)),
+    ]
+    .into_iter()
+    .flatten()
+    .map(|(h, k)| {
+        let (u, distance) = line_segment_closest(origin, direction, &samples[h].0, &samples[k].0);
+        (h, u, distance)
+    })
+    .min_by(|x, y| x.2.total_cmp(&y.2));
+    if let Some((h, u, _)) = refined {
+        b.fraction = ((h as f64 + u) / last).clamp(0.0, 1.0);
+        b.point = samples[h].0 + (samples[h + 1].0 - samples[h].0) * u;
     }
-    best
+    Some(b)
 }
 
 /// The closest approach of the line `origin + s·direction` and the segment `ab`: the
