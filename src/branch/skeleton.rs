@@ -2226,17 +2226,32 @@ mod tests {
         assert!((tip - sibling[1]).norm() < 0.01, "tip {tip}");
     }
 
+    /// A 0.3 stem with 10,000 points per metre and a petiole leaving it at 0.2 for (0.2, 0,
+    /// 0.35), seen only beyond `hidden` of its length (photos miss its base behind the leaves):
+    /// the points, the petiole's base and its tip.
+    fn stem_and_petiole_seen_from(
+        hidden: f64,
+        rng: &mut Rng,
+    ) -> (Vec<Point3<f64>>, Point3<f64>, Point3<f64>) {
+        let stem = [Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, 0.3)];
+        let mut points = tube(&stem, 0.004, 10_000.0, rng);
+        let base = Point3::new(0.0, 0.0, 0.2);
+        let tip = Point3::new(0.2, 0.0, 0.35);
+        points.extend(tube(
+            &[base + (tip - base) * hidden, tip],
+            0.002,
+            5_000.0,
+            rng,
+        ));
+        (points, base, tip)
+    }
+
     #[test]
     fn a_petiole_seen_only_near_its_leaf_is_bridged_to_the_stem() {
         let mut rng = Rng::seed_from(11);
-        let stem = [Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, 0.3)];
         // The petiole leaves the stem at 0.2 m; only its outer 60 % has points (the photos
         // never see its base behind the leaves).
-        let base = Point3::new(0.0, 0.0, 0.2);
-        let tip = Point3::new(0.2, 0.0, 0.35);
-        let seen_from = base + (tip - base) * 0.4;
-        let mut points = tube(&stem, 0.004, 10_000.0, &mut rng);
-        points.extend(tube(&[seen_from, tip], 0.002, 5_000.0, &mut rng));
+        let (mut points, base, tip) = stem_and_petiole_seen_from(0.4, &mut rng);
         // A piece of tube low down beside the plant, running across the way to the stem: no
         // plausible bridge starts from it.
         let stray = [
@@ -2268,17 +2283,8 @@ mod tests {
     #[test]
     fn a_piece_is_not_bridged_onto_another_pieces_bridge() {
         let mut rng = Rng::seed_from(13);
-        let stem = [Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, 0.3)];
-        let mut points = tube(&stem, 0.004, 10_000.0, &mut rng);
         // A petiole seen in its outer 60 %, bridged to the stem through (0.04, 0, 0.23).
-        let base = Point3::new(0.0, 0.0, 0.2);
-        let tip = Point3::new(0.2, 0.0, 0.35);
-        points.extend(tube(
-            &[base + (tip - base) * 0.4, tip],
-            0.002,
-            5_000.0,
-            &mut rng,
-        ));
+        let (mut points, _, _) = stem_and_petiole_seen_from(0.4, &mut rng);
         // A shorter piece pointing straight at the middle of that bridge (6 cm off), with the
         // stem 35° off its way back: the bridge is drawn where no point is, so the piece goes
         // to the stem.
@@ -2302,17 +2308,8 @@ mod tests {
     #[test]
     fn a_piece_hanging_from_its_end_nearest_the_root_is_not_bridged() {
         let mut rng = Rng::seed_from(14);
-        let stem = [Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, 0.3)];
-        let mut points = tube(&stem, 0.004, 10_000.0, &mut rng);
         // A rising petiole seen in its outer 60 %: bridged to the stem.
-        let base = Point3::new(0.0, 0.0, 0.2);
-        let tip = Point3::new(0.2, 0.0, 0.35);
-        points.extend(tube(
-            &[base + (tip - base) * 0.4, tip],
-            0.002,
-            5_000.0,
-            &mut rng,
-        ));
+        let (mut points, base, tip) = stem_and_petiole_seen_from(0.4, &mut rng);
         // On the other side, a tube as round and as long, 0.1 m off the stem, that runs
         // outward and down from its end nearest the root (20° below the horizontal): its way
         // back to the stem climbs, nothing is seen between, so no bridge is drawn.
@@ -2329,14 +2326,9 @@ mod tests {
     #[test]
     fn a_flat_band_far_from_the_tree_is_not_bridged() {
         let mut rng = Rng::seed_from(12);
-        let stem = [Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, 0.3)];
-        let mut points = tube(&stem, 0.004, 10_000.0, &mut rng);
         // A petiole seen only in its outer 40 %: a round piece whose bridge (0.15 m) is longer
         // than itself (0.1 m), drawn because it is a tube.
-        let base = Point3::new(0.0, 0.0, 0.2);
-        let tip = Point3::new(0.2, 0.0, 0.35);
-        let seen_from = base + (tip - base) * 0.6;
-        points.extend(tube(&[seen_from, tip], 0.002, 5_000.0, &mut rng));
+        let (mut points, base, tip) = stem_and_petiole_seen_from(0.6, &mut rng);
         // On the other side, a band 8 mm wide and 0.1 m long with no thickness to speak of
         // (a leaf's edge, stereo's halo beside a leaf), pointing at the stem from 0.15 m away.
         let (from, to) = (Point3::new(-0.12, 0.0, 0.29), Point3::new(-0.2, 0.0, 0.35));
