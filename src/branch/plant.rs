@@ -260,8 +260,8 @@ pub fn pot_shape(segmentation: &Segmentation, labels: &Labels) -> Option<PotShap
     pot_from_points(&pot, &voters, &foreground.up, &foreground.plant_center)
 }
 
-/// Where the plant leaves the soil. With a pot, the centre of its rim ([`pot_shape`]): the
-/// stem's foot ([`PlantBase::Stem`]). Without one, only the soil line is known
+/// Where the plant leaves the soil. With a pot, the soil surface on its axis
+/// ([`PotShape::soil_centre`]): the stem's foot ([`PlantBase::Stem`]). Without one, only the soil line is known
 /// ([`PlantBase::SoilLine`]): the point on the plant's axis ([`plant_axis`]) at the height of
 /// the lowest of the skeleton points in the quarter nearest that axis; the cameras' point
 /// itself when there are none.
@@ -271,7 +271,7 @@ pub fn plant_base(
     skeleton_points: &[Point3<f64>],
 ) -> PlantBase {
     match pot {
-        Some(pot) => PlantBase::Stem(pot.rim_centre),
+        Some(pot) => PlantBase::Stem(pot.soil_centre),
         None => PlantBase::SoilLine(soil_line_point(&segmentation.foreground, skeleton_points)),
     }
 }
@@ -399,15 +399,18 @@ fn plant_axis(points: &[Point3<f64>], up: &Vector3<f64>, centre: &Point3<f64>) -
 }
 
 /// Whether a point is soil, floor or pot rather than plant: below the plant's base, or, with
-/// a pot, on its rim (beyond 0.8 of its radius from its axis and less than a tenth of its
-/// radius above the rim).
+/// a pot, below its rim or on it (beyond 0.8 of its radius from its axis and less than a tenth
+/// of its radius above the rim). Inside a pot the points between the soil and the rim are cut
+/// with the rim (the soil, the rim's inner face and the stem are not told apart there); the
+/// skeleton draws the stem on down to the soil ([`PlantBase::Stem`]).
 pub fn below_the_plant(
     p: &Point3<f64>,
     up: &Vector3<f64>,
     base: &Point3<f64>,
     pot: Option<&PotShape>,
 ) -> bool {
-    let d = p - base;
+    let cut = pot.map_or(*base, |pot| pot.rim_centre);
+    let d = p - cut;
     let height = up.dot(&d);
     if height < 0.0 {
         return true;
@@ -1101,14 +1104,16 @@ mod tests {
     #[test]
     fn soil_floor_and_pot_rim_are_below_the_plant() {
         let up = Vector3::z();
-        let base = Point3::new(0.0, 0.0, 0.12);
+        let base = Point3::new(0.0, 0.0, 0.108);
         let pot = PotShape {
-            rim_centre: base,
+            rim_centre: Point3::new(0.0, 0.0, 0.12),
+            soil_centre: base,
             radius: 0.09,
         };
         let below = |p: Point3<f64>| below_the_plant(&p, &up, &base, Some(&pot));
-        // Soil and floor.
-        assert!(below(Point3::new(0.01, 0.0, 0.11)));
+        // Soil and floor, and whatever stands between the soil and the rim.
+        assert!(below(Point3::new(0.01, 0.0, 0.107)));
+        assert!(below(Point3::new(0.001, 0.0, 0.115)));
         assert!(below(Point3::new(0.3, 0.0, 0.0)));
         // The rim, just above the soil line at the pot's radius.
         assert!(below(Point3::new(0.0, 0.09, 0.125)));
@@ -1118,6 +1123,12 @@ mod tests {
         // Without a pot only the height counts.
         assert!(!below_the_plant(
             &Point3::new(0.0, 0.09, 0.125),
+            &up,
+            &base,
+            None
+        ));
+        assert!(!below_the_plant(
+            &Point3::new(0.001, 0.0, 0.115),
             &up,
             &base,
             None

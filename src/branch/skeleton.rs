@@ -137,9 +137,9 @@ pub fn automatic_skeleton(
 /// Where a plant's skeleton is rooted.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum PlantBase {
-    /// Where the stem leaves the soil, known (the centre of a pot's rim, on the plant's
-    /// vertical axis): the tree grows from the lowest points near that axis, and a stem that
-    /// does not reach down to the point is drawn on to it.
+    /// Where the stem leaves the soil, known (the soil surface on a pot's axis): the tree
+    /// grows from the lowest points near that axis, and the stem is drawn on from its first
+    /// node (the centroid of the first level of points) to the point.
     Stem(Point3<f64>),
     /// Only a point of the soil line (no pot to say where the stem stands), on an axis fitted
     /// to the plant's points (`branch::plant::plant_axis`), which need not be where the
@@ -199,11 +199,11 @@ struct Connected {
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Role {
     /// The whole plant: the root is the lowest point near the axis, and the stem is drawn on
-    /// to the plant's base when they are more than a level width apart.
+    /// to the plant's base.
     Plant,
     /// The whole plant over a soil-line point ([`PlantBase::SoilLine`]): the root is the
     /// point nearest it, and the stem is drawn straight down to the soil line when it ends
-    /// more than a level width above it.
+    /// above it.
     PlantOnSoilLine,
     /// A piece of tube to be bridged to the plant: the root is its point nearest the base.
     Piece,
@@ -518,12 +518,14 @@ fn connected_skeleton(
         if parent.is_none() {
             let foot = nodes[chain[0]].centroid;
             match role {
-                Role::Plant if (foot - axis_point).norm() > level_width => {
+                // The first level's centroid stands most of a level above the points' foot:
+                // the stem is drawn on from it to where it leaves the soil.
+                Role::Plant if (foot - axis_point).norm() > 0.0 => {
                     attachment_point = Some(*axis_point);
                 }
                 Role::PlantOnSoilLine => {
                     let above = up.dot(&(foot - axis_point));
-                    if above > level_width {
+                    if above > 0.0 {
                         attachment_point = Some(foot - up * above);
                     }
                 }
@@ -1870,6 +1872,23 @@ mod tests {
         let start = main.cylinder.skeleton.point_at_fraction(0.0);
         assert!(start.x.hypot(start.y) < 1e-9, "{start}");
         assert!(end.z < 0.9, "{end}");
+    }
+
+    #[test]
+    fn a_stem_is_drawn_on_to_its_base_from_its_first_level() {
+        // A stem standing on its base: the tree's first node, the centroid of the first level
+        // of points, stands most of a level above it. The stem starts at the base, where it
+        // leaves the soil, not there.
+        let mut rng = Rng::seed_from(4);
+        let stem = [Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, 0.4)];
+        let points = tube(&stem, 0.001, 3_000.0, &mut rng);
+        let (tree, stats) = skeleton_z_up(&points);
+        let main = &tree.branches[0];
+        let start = main.cylinder.skeleton.point_at_fraction(0.0);
+        assert!(start.coords.norm() < 1e-9, "{start} {stats:?}");
+        // The tube from there on: the first level's centroid within a level of the base.
+        let next = main.cylinder.skeleton.point_at_fraction(0.01);
+        assert!(next.x.hypot(next.y) < 0.001 && next.z < 0.01, "{next}");
     }
 
     #[test]

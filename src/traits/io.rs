@@ -230,15 +230,92 @@ pub fn read_ground_truth(dataset: &Path, plant: &str) -> Result<PlantOrgans, Tra
         });
     }
     let branches_path = gt.join("branches.json");
-    let branches = SkeletonFile::read(&branches_path)
+    let mut branches = SkeletonFile::read(&branches_path)
         .map_err(|e| input(&branches_path, e))?
         .branches;
+    if let Some(soil_height) = soil_height(dataset)? {
+        cut_at_the_soil(&mut branches, soil_height);
+    }
     Ok(PlantOrgans {
         plant: plant.to_owned(),
         up_world: Vector3::z(),
         leaves,
         branches,
     })
+}
+
+/// The height of a synthetic dataset's soil surface (`meta.json`'s `plant.pot.soil_height`);
+/// `None` without a `meta.json` or a pot in it.
+fn soil_height(dataset: &Path) -> Result<Option<f64>, TraitsError> {
+    let path = dataset.join("meta.json");
+    let text = match std::fs::read_to_string(&path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(input(&path, e)),
+    };
+    let meta: serde_json::Value = serde_json::from_str(&text).map_err(|e| input(&path, e))?;
+    Ok(meta["plant"]["pot"]["soil_height"].as_f64())
+}
+
+/// The truth's stems as a photo shows them: from where they leave the soil (`soil_height`, z
+/// up). The generator plants each stem 10 mm deep, while a reconstruction roots its stem on
+/// the soil surface, so heights (insertion heights, the plant's height) are measured from one
+/// datum and a stem's length is its length above the soil. Each root branch that starts below
+/// the soil loses its centreline up to where it crosses it; its length, base radius (linear
+/// along it), control points and its children's insertion fractions follow. Side branches are
+/// left as they are; a root branch entirely below the soil too.
+fn cut_at_the_soil(branches: &mut [SkeletonRecord], soil_height: f64) {
+    let mut cuts: Vec<(u32, f64)> = Vec::new();
+    for branch in branches.iter_mut().filter(|b| b.parent.is_none()) {
+        let line = &branch.centerline;
+        let Some(first_above) = line.iter().position(|c| c[2] >= soil_height) else {
+            continue;
+        };
+        if first_above == 0 {
+            continue;
+        }
+        let old_length = branch.centerline_length();
+        let (a, b) = (
+            Point3::from(line[first_above - 1]),
+            Point3::from(line[first_above]),
+        );
+        let t = (soil_height - a.z) / (b.z - a.z);
+        let crossing = a + (b - a) * t;
+        let removed = crate::util::polyline::length(
+            &line[..first_above]
+                .iter()
+                .map(|c| Point3::from(*c))
+                .chain(std::iter::once(crossing))
+                .collect::<Vec<_>>(),
+        );
+        if !(old_length > 0.0 && removed < old_length) {
+            continue;
+        }
+        let mut centerline = vec![[crossing.x, crossing.y, crossing.z]];
+        centerline.extend_from_slice(&line[first_above..]);
+        branch.centerline = centerline;
+        let share = removed / old_length;
+        branch.radius_start += (branch.radius_end - branch.radius_start) * share;
+        if branch.length > 0.0 {
+            branch.length *= 1.0 - share;
+        }
+        let mut control_points = vec![[crossing.x, crossing.y, crossing.z]];
+        control_points.extend(
+            branch
+                .control_points
+                .iter()
+                .filter(|c| c[2] > soil_height)
+                .copied(),
+        );
+        branch.control_points = control_points;
+        cuts.push((branch.id, share));
+    }
+    for (parent, share) in cuts {
+        for child in branches.iter_mut().filter(|b| b.parent == Some(parent)) {
+            child.parent_fraction =
+                ((child.parent_fraction - share) / (1.0 - share)).clamp(0.0, 1.0);
+        }
+    }
 }
 
 /// One CSV field: quoted when it holds a comma, quote or line break (RFC 4180).
@@ -419,6 +496,65 @@ mod tests {
             branches[0].length
         );
         assert_eq!(leaves[0].branch, Some((0, 1.0)));
+    }
+
+    #[test]
+    fn the_truths_stem_is_measured_from_where_it_leaves_the_soil() {
+        // A stem planted 10 mm deep (z 0.09 to 0.4, soil at 0.1) with a side branch at its
+        // middle, and a side branch of its own that starts below the soil (left as it is).
+        let mut branches = vec![
+            straight(0, None, 0.0, [0.0, 0.0, 0.09], [0.0, 0.0, 0.4]),
+            straight(1, Some(0), 0.5, [0.0, 0.0, 0.245], [0.1, 0.0, 0.245]),
+        ];
+        branches[0].radius_start = 0.0041;
+        branches[0].radius_end = 0.001;
+        let side_before = branches[1].centerline.clone();
+        cut_at_the_soil(&mut branches, 0.1);
+        let stem = &branches[0];
+        assert_eq!(stem.centerline.first(), Some(&[0.0, 0.0, 0.1]));
+        assert!((stem.centerline_length() - 0.3).abs() < 1e-12);
+        assert!((stem.length - 0.3).abs() < 1e-12, "{}", stem.length);
+        assert!(
+            (stem.radius_start - 0.004).abs() < 1e-12,
+            "{}",
+            stem.radius_start
+        );
+        assert_eq!(stem.radius_end, 0.001);
+        assert_eq!(stem.control_points, vec![[0.0, 0.0, 0.1], [0.0, 0.0, 0.4]]);
+        // The side branch stays where it was on the stem.
+        assert!((branches[1].parent_fraction - 0.145 / 0.3).abs() < 1e-12);
+        assert_eq!(branches[1].centerline, side_before);
+        let organs = PlantOrgans {
+            plant: "p".into(),
+            up_world: Vector3::z(),
+            leaves: Vec::new(),
+            branches: branches.clone(),
+        };
+        let table = crate::traits::plant_traits(&organs, None);
+        let height = table.value("branch_001", "insertion_height").unwrap();
+        assert!((height - 0.145).abs() < 1e-12, "{height}");
+        assert!((table.value("branch_000", "length").unwrap() - 0.3).abs() < 1e-12);
+        // A stem standing on the soil, or one wholly under it, is not cut.
+        let on_soil = vec![straight(0, None, 0.0, [0.0, 0.0, 0.1], [0.0, 0.0, 0.4])];
+        let mut cut = on_soil.clone();
+        cut_at_the_soil(&mut cut, 0.1);
+        assert_eq!(cut, on_soil);
+        cut_at_the_soil(&mut cut, 0.5);
+        assert_eq!(cut, on_soil);
+    }
+
+    #[test]
+    fn the_soil_height_comes_from_the_datasets_meta_when_it_has_a_pot() {
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(soil_height(dir.path()).unwrap(), None);
+        let meta = dir.path().join("meta.json");
+        std::fs::write(&meta, r#"{"plant": {"pot": {"soil_height": 0.107}}}"#).unwrap();
+        assert_eq!(soil_height(dir.path()).unwrap(), Some(0.107));
+        std::fs::write(&meta, r#"{"plant": {"height": 0.3}}"#).unwrap();
+        assert_eq!(soil_height(dir.path()).unwrap(), None);
+        std::fs::write(&meta, "{ not json").unwrap();
+        let error = soil_height(dir.path()).unwrap_err().to_string();
+        assert!(error.contains("meta.json"), "{error}");
     }
 
     #[test]
