@@ -318,7 +318,7 @@ pub fn spread_about_a_taper(
             shr + (h - mean_h) * (r - mean_r),
         )
     });
-    if !(shh > 0.0) {
+    if shh.is_nan() || shh <= 0.0 {
         return None;
     }
     let slope = shr / shh;
