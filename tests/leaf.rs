@@ -173,7 +173,11 @@ fn reconstructed_leaves_meet_the_accuracy_targets() {
 /// the stem: the main axis ends where the crown thins it and the petiole it ran on into is a
 /// branch of its own (`branch::skeleton::stem_top`). Measured on this dataset: before, the
 /// main axis (stem and petiole, 0.3 m) matched no true branch's length; now the true stem is
-/// matched, 38 % long (it ends a level or two up in the crown's knot).
+/// matched, 66 % long (83 mm for the 50 mm from the soil to the crown: it ends 17 mm up in the
+/// crown's knot and wanders on the way). Until the truth was measured from the soil surface
+/// (stop 74) its stem counted the 10 mm the generator buries, and this read 38 %; the bound
+/// still tells a stem ending in the crown from one running on up a petiole (0.3 m, six times
+/// the true stem).
 fn stem_ends_at_its_crown(out: &Path) {
     let traits = eval_json(out, &["--traits"]);
     let stem = traits["branches"]
@@ -183,7 +187,7 @@ fn stem_ends_at_its_crown(out: &Path) {
         .find(|b| b["gt_branch"] == 0)
         .unwrap_or_else(|| panic!("the true stem is matched by no branch: {traits}"));
     let error = stem["length_relative_error"].as_f64().unwrap();
-    assert!(error <= 0.5, "stem length error {error}: {stem}");
+    assert!(error <= 0.75, "stem length error {error}: {stem}");
 }
 
 #[test]
