@@ -577,7 +577,8 @@ pub fn plant_traits(organs: &PlantOrgans, scale: Option<&Scale>) -> TraitTable {
             });
         }
     };
-    // The plant's base: the root branch's start, else the lowest organ point.
+    // The plant's base (where the stem leaves the soil): the root branch's start, else the lowest
+    // organ point.
     let all_points: Vec<Point3<f64>> = organs
         .leaves
         .iter()
