@@ -261,10 +261,10 @@ pub fn pot_shape(segmentation: &Segmentation, labels: &Labels) -> Option<PotShap
 }
 
 /// Where the plant leaves the soil. With a pot, the soil surface on its axis
-/// ([`PotShape::soil_centre`]): the stem's foot ([`PlantBase::Stem`]). Without one, only the soil line is known
-/// ([`PlantBase::SoilLine`]): the point on the plant's axis ([`plant_axis`]) at the height of
-/// the lowest of the skeleton points in the quarter nearest that axis; the cameras' point
-/// itself when there are none.
+/// ([`PotShape::soil_centre`]): the stem's foot ([`PlantBase::Stem`]). Without one, only the
+/// soil line is known ([`PlantBase::SoilLine`]): the point on the plant's axis
+/// ([`plant_axis`]) at the height of the lowest of the skeleton points in the quarter nearest
+/// that axis; the cameras' point itself when there are none.
 pub fn plant_base(
     segmentation: &Segmentation,
     pot: Option<&PotShape>,

@@ -1878,7 +1878,7 @@ mod tests {
     fn a_stem_is_drawn_on_to_its_base_from_its_first_level() {
         // A stem standing on its base: the tree's first node, the centroid of the first level
         // of points, stands most of a level above it. The stem starts at the base, where it
-        // leaves the soil, not there.
+        // leaves the soil, not at that node.
         let mut rng = Rng::seed_from(4);
         let stem = [Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, 0.4)];
         let points = tube(&stem, 0.001, 3_000.0, &mut rng);
