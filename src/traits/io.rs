@@ -281,13 +281,11 @@ fn cut_at_the_soil(branches: &mut [SkeletonRecord], soil_height: f64) {
         );
         let t = (soil_height - a.z) / (b.z - a.z);
         let crossing = a + (b - a) * t;
-        let removed = crate::util::polyline::length(
-            &line[..first_above]
-                .iter()
-                .map(|c| Point3::from(*c))
-                .chain(std::iter::once(crossing))
-                .collect::<Vec<_>>(),
-        );
+        let removed = line[..first_above]
+            .windows(2)
+            .map(|w| (Point3::from(w[1]) - Point3::from(w[0])).norm())
+            .sum::<f64>()
+            + (crossing - a).norm();
         if !(old_length > 0.0 && removed < old_length) {
             continue;
         }
@@ -501,7 +499,7 @@ mod tests {
     #[test]
     fn the_truths_stem_is_measured_from_where_it_leaves_the_soil() {
         // A stem planted 10 mm deep (z 0.09 to 0.4, soil at 0.1) with a side branch at its
-        // middle, and a side branch of its own that starts below the soil (left as it is).
+        // middle (its own centreline left as it is).
         let mut branches = vec![
             straight(0, None, 0.0, [0.0, 0.0, 0.09], [0.0, 0.0, 0.4]),
             straight(1, Some(0), 0.5, [0.0, 0.0, 0.245], [0.1, 0.0, 0.245]),
