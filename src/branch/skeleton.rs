@@ -20,7 +20,7 @@ use crate::util::geometry::distance_from_axis;
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap};
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::{Matrix3, Point3, SymmetricEigen, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -749,7 +749,25 @@ fn bridge_pieces(
                 }
             }
         }
-        let Some((_, parent, fraction, anchor)) = best else {
+        // Where the piece's own line, extended back, crosses an axis (the first one it
+        // meets), the base lies there; the cone's nearest sample is the fallback.
+        let crossing = piece_line(main_axis, sub.stats.level_width).and_then(|(start, line)| {
+            let line = if line.dot(&backward) >= 0.0 {
+                line
+            } else {
+                -line
+            };
+            branches
+                .iter()
+                .filter_map(|branch| {
+                    let drawn = bridge_share.get(&branch.id).copied().unwrap_or(0.0);
+                    let c = closest_crossing(branch, &start, &line, reach)?;
+                    (c.fraction >= drawn)
+                        .then(|| ((c.point - start).dot(&line), branch.id, c.fraction, c.point))
+                })
+                .min_by(|a, b| a.0.total_cmp(&b.0))
+        });
+        let Some((_, parent, fraction, anchor)) = crossing.or(best) else {
             continue;
         };
         if (anchor - origin).norm() > length
@@ -787,6 +805,23 @@ fn bridge_pieces(
         bridged += 1;
     }
     bridged
+}
+
+/// A bridged piece's line: fitted to its main axis over its first [`DIRECTION_LEVELS`] level
+/// widths; the point on it nearest the axis's start, and its unit direction (either sign).
+fn piece_line(axis: &Spline, level_width: f64) -> Option<(Point3<f64>, Vector3<f64>)> {
+    const SAMPLES: usize = 16;
+    let length = axis.length();
+    if length <= 0.0 {
+        return None;
+    }
+    let end = (DIRECTION_LEVELS * level_width / length).min(1.0);
+    let along: Vec<Point3<f64>> = (0..=SAMPLES)
+        .map(|i| axis.point_at_fraction(end * i as f64 / SAMPLES as f64))
+        .collect();
+    let (centre, direction) = fit_line(&along)?;
+    let start = centre + direction * (along[0] - centre).dot(&direction);
+    Some((start, direction))
 }
 
 /// What [`recover_missed_tubes`] looks at.
@@ -1317,6 +1352,31 @@ fn spread(node: &Node, points: &[Point3<f64>]) -> f64 {
     (sum / node.points.len().max(1) as f64).sqrt()
 }
 
+/// How far past its base (in level widths) a branch's line is fitted to its axis when it is
+/// extended back to the axis it grows out of ([`reanchor_base`], [`bridge_pieces`]).
+const DIRECTION_LEVELS: f64 = 8.0;
+
+/// The least-squares line through `points`: their mean and unit principal direction;
+/// `None` for fewer than two points or when they coincide.
+fn fit_line(points: &[Point3<f64>]) -> Option<(Point3<f64>, Vector3<f64>)> {
+    if points.len() < 2 {
+        return None;
+    }
+    let count = points.len() as f64;
+    let mean = points.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / count;
+    let covariance = points.iter().fold(Matrix3::zeros(), |a, p| {
+        let d = p.coords - mean;
+        a + d * d.transpose()
+    }) / count;
+    if covariance.trace() <= 0.0 || !covariance.trace().is_finite() {
+        return None;
+    }
+    let eigen = SymmetricEigen::new(covariance);
+    let largest = eigen.eigenvalues.imax();
+    let axis = eigen.eigenvectors.column(largest).into_owned();
+    Some((Point3::from(mean), axis.try_normalize(1e-12)?))
+}
+
 /// Where side branches leave a crowded base (a rosette's crown, a whorl), one geodesic level
 /// holds several branches at once: its pieces are wide and their centroids lie between the
 /// branches, so the chain wanders there, or it follows a neighbouring branch and leaves it
@@ -1398,8 +1458,25 @@ fn reanchor_base(
     if kept.len() < DIRECTION_NODES {
         return None;
     }
-    let origin = kept[0];
-    let direction = (origin - kept[DIRECTION_NODES - 1]).try_normalize(1e-12)?;
+    // The branch's line: fitted to its nodes over DIRECTION_LEVELS level widths past the cut
+    // (DIRECTION_NODES at least), through their mean; a chord over the first few nodes turns
+    // with every centroid's noise, and the base is that line extended tens of millimetres.
+    let mut run = 0.0;
+    let fitted = 1 + kept
+        .windows(2)
+        .take_while(|w| {
+            run += (w[1] - w[0]).norm();
+            run <= DIRECTION_LEVELS * level_width
+        })
+        .count();
+    let (centre, axis) = fit_line(&kept[..fitted.max(DIRECTION_NODES)])?;
+    // Pointing back, from the far nodes towards the cut.
+    let direction = if axis.dot(&(kept[0] - kept[DIRECTION_NODES - 1])) >= 0.0 {
+        axis
+    } else {
+        -axis
+    };
+    let origin = centre + direction * (kept[0] - centre).dot(&direction);
     let grandparent = sibling_of(
         &branches[parent as usize],
         attachment,
