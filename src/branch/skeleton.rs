@@ -815,12 +815,16 @@ fn piece_line(axis: &Spline, level_width: f64) -> Option<(Point3<f64>, Vector3<f
     if length <= 0.0 {
         return None;
     }
-    let end = (DIRECTION_LEVELS * level_width / length).min(1.0);
+    // The first level is the piece's end cap, not a section across it: its centroid lies
+    // toward the root point's side.
+    let begin = (level_width / length).min(0.5);
+    let end = ((1.0 + DIRECTION_LEVELS) * level_width / length).min(1.0);
     let along: Vec<Point3<f64>> = (0..=SAMPLES)
-        .map(|i| axis.point_at_fraction(end * i as f64 / SAMPLES as f64))
+        .map(|i| axis.point_at_fraction(begin + (end - begin) * i as f64 / SAMPLES as f64))
         .collect();
     let (centre, direction) = fit_line(&along)?;
-    let start = centre + direction * (along[0] - centre).dot(&direction);
+    let first = axis.point_at_fraction(0.0);
+    let start = centre + direction * (first - centre).dot(&direction);
     Some((start, direction))
 }
 
@@ -2374,6 +2378,56 @@ mod tests {
         // Nothing is drawn along the stray piece.
         let stray_coverage = best_coverage(&tree, &stray, 0.01);
         assert!(stray_coverage < 0.2, "stray coverage {stray_coverage}");
+    }
+
+    #[test]
+    fn a_bridged_piece_meets_its_stem_where_its_own_line_does() {
+        // The petiole rises from the stem's axis at 0.2 m, 37° above the horizontal, seen in
+        // its outer 60 % only; its line, extended back, meets the stem there. Over twelve
+        // samplings its base stays within two stem radii (8 mm) of it in height and on the
+        // stem's axis; the stem's axis sample nearest its seen end within the cone of its way
+        // back (the previous rule) strayed up to 14 mm.
+        for seed in 0..12 {
+            let mut rng = Rng::seed_from(seed);
+            let (points, base, tip) = stem_and_petiole_seen_from(0.4, &mut rng);
+            let (tree, stats) = skeleton_z_up(&points);
+            assert_eq!(stats.pieces_bridged, 1, "seed {seed}: {stats:?}");
+            let petiole = tree
+                .branches
+                .iter()
+                .max_by(|a, b| {
+                    let near = |b: &Branch| b.cylinder.skeleton.distance_to(&tip);
+                    near(b).total_cmp(&near(a))
+                })
+                .expect("branches");
+            let start = petiole.cylinder.skeleton.point_at_fraction(0.0);
+            assert!(
+                (start.z - base.z).abs() < 0.008 && start.coords.xy().norm() < 0.004,
+                "seed {seed}: the petiole starts at {start:?}, not at {base:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_line_is_fitted_through_noisy_points_and_not_through_one_place() {
+        let mut rng = Rng::seed_from(31);
+        let direction = Vector3::new(1.0, 2.0, -2.0) / 3.0;
+        let start = Point3::new(0.1, -0.2, 0.3);
+        let points: Vec<Point3<f64>> = (0..40)
+            .map(|i| {
+                let jitter = Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.002;
+                start + direction * (0.005 * i as f64) + jitter
+            })
+            .collect();
+        let (centre, axis) = fit_line(&points).expect("a line");
+        assert!(axis.dot(&direction).abs() > 0.995, "axis {axis:?}");
+        let off_line = (centre - start) - direction * (centre - start).dot(&direction);
+        assert!(
+            off_line.norm() < 0.002,
+            "the line misses its points by {off_line:?}"
+        );
+        assert!(fit_line(&[start; 5]).is_none());
+        assert!(fit_line(&[start]).is_none());
     }
 
     #[test]
