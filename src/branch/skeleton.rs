@@ -749,25 +749,7 @@ fn bridge_pieces(
                 }
             }
         }
-        // Where the piece's own line, extended back, crosses an axis (the first one it
-        // meets), the base lies there; the cone's nearest sample is the fallback.
-        let crossing = piece_line(main_axis, sub.stats.level_width).and_then(|(start, line)| {
-            let line = if line.dot(&backward) >= 0.0 {
-                line
-            } else {
-                -line
-            };
-            branches
-                .iter()
-                .filter_map(|branch| {
-                    let drawn = bridge_share.get(&branch.id).copied().unwrap_or(0.0);
-                    let c = closest_crossing(branch, &start, &line, reach)?;
-                    (c.fraction >= drawn)
-                        .then(|| ((c.point - start).dot(&line), branch.id, c.fraction, c.point))
-                })
-                .min_by(|a, b| a.0.total_cmp(&b.0))
-        });
-        let Some((_, parent, fraction, anchor)) = crossing.or(best) else {
+        let Some((_, parent, fraction, anchor)) = best else {
             continue;
         };
         if (anchor - origin).norm() > length
@@ -805,27 +787,6 @@ fn bridge_pieces(
         bridged += 1;
     }
     bridged
-}
-
-/// A bridged piece's line: fitted to its main axis over its first [`DIRECTION_LEVELS`] level
-/// widths; the point on it nearest the axis's start, and its unit direction (either sign).
-fn piece_line(axis: &Spline, level_width: f64) -> Option<(Point3<f64>, Vector3<f64>)> {
-    const SAMPLES: usize = 16;
-    let length = axis.length();
-    if length <= 0.0 {
-        return None;
-    }
-    // The first level is the piece's end cap, not a section across it: its centroid lies
-    // toward the root point's side.
-    let begin = (level_width / length).min(0.5);
-    let end = ((1.0 + DIRECTION_LEVELS) * level_width / length).min(1.0);
-    let along: Vec<Point3<f64>> = (0..=SAMPLES)
-        .map(|i| axis.point_at_fraction(begin + (end - begin) * i as f64 / SAMPLES as f64))
-        .collect();
-    let (centre, direction) = fit_line(&along)?;
-    let first = axis.point_at_fraction(0.0);
-    let start = centre + direction * (first - centre).dot(&direction);
-    Some((start, direction))
 }
 
 /// What [`recover_missed_tubes`] looks at.
@@ -1356,8 +1317,8 @@ fn spread(node: &Node, points: &[Point3<f64>]) -> f64 {
     (sum / node.points.len().max(1) as f64).sqrt()
 }
 
-/// How far past its base (in level widths) a branch's line is fitted to its axis when it is
-/// extended back to the axis it grows out of ([`reanchor_base`], [`bridge_pieces`]).
+/// How far past its base (in level widths) a side branch's line is fitted to its nodes when
+/// it is extended back to the axis it grows out of ([`reanchor_base`]).
 const DIRECTION_LEVELS: f64 = 8.0;
 
 /// The least-squares line through `points`: their mean and unit principal direction;
@@ -1387,8 +1348,10 @@ fn fit_line(points: &[Point3<f64>]) -> Option<(Point3<f64>, Vector3<f64>)> {
 /// with a kink. Looked for among the chain's inner-half nodes within 5 parent radii of the
 /// parent's axis: the base is cut after the last wide node (wider than 1.5× the median spread
 /// of the chain's outer half) or kink (a step turning more than 45° from the direction of the
-/// nodes beyond it; the step from the attachment point counts too). The branch's direction
-/// just past the cut is extended backwards to the axis it passes closest to, in that axis's
+/// nodes beyond it; the step from the attachment point counts too). The branch's line past the
+/// cut (least squares through its nodes over [`DIRECTION_LEVELS`] level widths; a chord over
+/// three levels put the bases of sixteen broadleaf photo plants' side branches a median 19.9
+/// mm off in height, the line 15.1 mm) is extended backwards to the axis it passes closest to, in that axis's
 /// radii: the parent's or an ancestor's, within 3 radii, at most the branch's kept length
 /// away and crossing it at 5° or more (AdTree-like straight connection). A branch that left
 /// its parent as a sibling ([`sibling_of`]) is extended past the parent, as far as needed,
@@ -2381,18 +2344,26 @@ mod tests {
     }
 
     #[test]
-    fn a_bridged_piece_meets_its_stem_where_its_own_line_does() {
-        // The petiole rises from the stem's axis at 0.2 m, 37° above the horizontal, seen in
-        // its outer 60 % only; its line, extended back, meets the stem there. Over twelve
-        // samplings its base stays within two stem radii (8 mm) of it in height and on the
-        // stem's axis; the stem's axis sample nearest its seen end within the cone of its way
-        // back (the previous rule) strayed up to 14 mm.
-        for seed in 0..12 {
+    fn a_noisy_side_branch_meets_its_stem_where_its_fitted_line_does() {
+        // A side branch leaving a 16 mm stem at 0.1 m, 35° from it, its points jittered by
+        // 1 mm (stereo noise): its level sets part from the stem's a few centimetres out and
+        // the base is its line extended back. Over sixteen samplings the fitted line puts it
+        // a median 0.8 mm from the junction in height (15 within 4 mm); the chord over the
+        // first three levels put it a median 4.2 mm off (7 within 4 mm).
+        let mut off = Vec::new();
+        for seed in 0..16 {
             let mut rng = Rng::seed_from(seed);
-            let (points, base, tip) = stem_and_petiole_seen_from(0.4, &mut rng);
-            let (tree, stats) = skeleton_z_up(&points);
-            assert_eq!(stats.pieces_bridged, 1, "seed {seed}: {stats:?}");
-            let petiole = tree
+            let stem = [Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, 0.3)];
+            let mut points = tube(&stem, 0.008, 20_000.0, &mut rng);
+            let junction = Point3::new(0.0, 0.0, 0.1);
+            let angle = 35f64.to_radians();
+            let tip = junction + Vector3::new(angle.sin(), 0.0, angle.cos()) * 0.2;
+            points.extend(tube(&[junction, tip], 0.003, 8_000.0, &mut rng));
+            for p in &mut points {
+                *p += Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.001;
+            }
+            let (tree, _) = skeleton_z_up(&points);
+            let branch = tree
                 .branches
                 .iter()
                 .max_by(|a, b| {
@@ -2400,12 +2371,12 @@ mod tests {
                     near(b).total_cmp(&near(a))
                 })
                 .expect("branches");
-            let start = petiole.cylinder.skeleton.point_at_fraction(0.0);
-            assert!(
-                (start.z - base.z).abs() < 0.008 && start.coords.xy().norm() < 0.004,
-                "seed {seed}: the petiole starts at {start:?}, not at {base:?}"
-            );
+            assert_eq!(branch.parent, Some(0), "seed {seed}");
+            off.push((branch.cylinder.skeleton.point_at_fraction(0.0).z - junction.z).abs());
         }
+        off.sort_by(f64::total_cmp);
+        let within = off.iter().filter(|&&d| d < 0.004).count();
+        assert!(off[off.len() / 2] < 0.002 && within >= 14, "{off:?}");
     }
 
     #[test]
