@@ -1350,9 +1350,9 @@ fn fit_line(points: &[Point3<f64>]) -> Option<(Point3<f64>, Vector3<f64>)> {
 /// of the chain's outer half) or kink (a step turning more than 45° from the direction of the
 /// nodes beyond it; the step from the attachment point counts too). The branch's line past the
 /// cut (least squares through its nodes over [`DIRECTION_LEVELS`] level widths, or its inner
-/// half where shorter: a short organ curves over its length; a chord over
-/// three levels put the bases of sixteen broadleaf photo plants' side branches a median 19.9
-/// mm off in height, the line 15.1 mm) is extended backwards to the axis it passes closest to, in that axis's
+/// half where shorter: a short organ curves over its length; a chord over three levels put
+/// the bases of sixteen broadleaf photo plants' side branches a median 19.9 mm off in height,
+/// the line 15.1 mm) is extended backwards to the axis it passes closest to, in that axis's
 /// radii: the parent's or an ancestor's, within 3 radii, at most the branch's kept length
 /// away and crossing it at 5° or more (AdTree-like straight connection). A branch that left
 /// its parent as a sibling ([`sibling_of`]) is extended past the parent, as far as needed,
@@ -1427,15 +1427,15 @@ fn reanchor_base(
         return None;
     }
     // The branch's line: fitted to its nodes over DIRECTION_LEVELS level widths past the cut
-    // (DIRECTION_NODES at least), through their mean; a chord over the first few nodes turns
+    // or half its kept length (DIRECTION_NODES at least), through their mean; a chord over the first few nodes turns
     // with every centroid's noise, and the base is that line extended tens of millimetres.
-    let reach = (DIRECTION_LEVELS * level_width).min(0.5 * crate::util::polyline::length(kept));
+    let window = (DIRECTION_LEVELS * level_width).min(0.5 * crate::util::polyline::length(kept));
     let mut run = 0.0;
     let fitted = 1 + kept
         .windows(2)
         .take_while(|w| {
             run += (w[1] - w[0]).norm();
-            run <= reach
+            run <= window
         })
         .count();
     let (centre, axis) = fit_line(&kept[..fitted.max(DIRECTION_NODES)])?;
