@@ -20,7 +20,7 @@ use crate::util::geometry::distance_from_axis;
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap};
 
-use nalgebra::{Matrix3, Point3, SymmetricEigen, Vector3};
+use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -1321,25 +1321,12 @@ fn spread(node: &Node, points: &[Point3<f64>]) -> f64 {
 /// it is extended back to the axis it grows out of ([`reanchor_base`]).
 const DIRECTION_LEVELS: f64 = 8.0;
 
-/// The least-squares line through `points`: their mean and unit principal direction;
-/// `None` for fewer than two points or when they coincide.
+/// The least-squares line through `points`: their centroid and main principal axis
+/// ([`Shape`]); `None` when they coincide (or are fewer than two).
 fn fit_line(points: &[Point3<f64>]) -> Option<(Point3<f64>, Vector3<f64>)> {
-    if points.len() < 2 {
-        return None;
-    }
-    let count = points.len() as f64;
-    let mean = points.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / count;
-    let covariance = points.iter().fold(Matrix3::zeros(), |a, p| {
-        let d = p.coords - mean;
-        a + d * d.transpose()
-    }) / count;
-    if covariance.trace() <= 0.0 || !covariance.trace().is_finite() {
-        return None;
-    }
-    let eigen = SymmetricEigen::new(covariance);
-    let largest = eigen.eigenvalues.imax();
-    let axis = eigen.eigenvectors.column(largest).into_owned();
-    Some((Point3::from(mean), axis.try_normalize(1e-12)?))
+    let shape = Shape::of(points.iter().copied());
+    (shape.eigenvalues[0] > 0.0 && shape.eigenvalues[0].is_finite())
+        .then_some((shape.centroid, shape.axes[0]))
 }
 
 /// Where side branches leave a crowded base (a rosette's crown, a whorl), one geodesic level
@@ -1833,6 +1820,17 @@ mod tests {
     }
 
     /// The default skeleton of points around a vertical axis through the origin.
+    /// The branch whose axis passes nearest `point` (a tree has at least its stem).
+    fn nearest_branch<'a>(tree: &'a BranchTree, point: &Point3<f64>) -> &'a Branch {
+        tree.branches
+            .iter()
+            .min_by(|a, b| {
+                let near = |b: &Branch| b.cylinder.skeleton.distance_to(point);
+                near(a).total_cmp(&near(b))
+            })
+            .expect("branches")
+    }
+
     fn skeleton_z_up(points: &[Point3<f64>]) -> (BranchTree, SkeletonStats) {
         automatic_skeleton(
             points,
@@ -2329,14 +2327,7 @@ mod tests {
         // The whole petiole is drawn, its hidden base straight back to the stem.
         let coverage = best_coverage(&tree, &[base, tip], 0.01);
         assert!(coverage > 0.9, "petiole coverage {coverage}");
-        let petiole = tree
-            .branches
-            .iter()
-            .max_by(|a, b| {
-                let near = |b: &Branch| b.cylinder.skeleton.distance_to(&tip);
-                near(b).total_cmp(&near(a))
-            })
-            .expect("branches");
+        let petiole = nearest_branch(&tree, &tip);
         assert_eq!(petiole.parent, Some(0));
         let start = petiole.cylinder.skeleton.point_at_fraction(0.0);
         assert!((start - base).norm() < 0.02, "petiole starts at {start:?}");
@@ -2365,14 +2356,7 @@ mod tests {
                 *p += Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.001;
             }
             let (tree, _) = skeleton_z_up(&points);
-            let branch = tree
-                .branches
-                .iter()
-                .max_by(|a, b| {
-                    let near = |b: &Branch| b.cylinder.skeleton.distance_to(&tip);
-                    near(b).total_cmp(&near(a))
-                })
-                .expect("branches");
+            let branch = nearest_branch(&tree, &tip);
             assert_eq!(branch.parent, Some(0), "seed {seed}");
             off.push((branch.cylinder.skeleton.point_at_fraction(0.0).z - junction.z).abs());
         }
