@@ -299,8 +299,8 @@ fn connected_skeleton(
     // base); the other components are joined to the root's. The largest component need not
     // hold the stem: a trunk that stereo samples sparsely falls apart into small components,
     // farther from the crown's than the joins reach (on ten of sixteen broadleaf photo plants
-    // the largest component started 65–180 mm above the soil, and the stem was drawn as one
-    // straight line up to it), and the crown grows from the trunk through the bridges instead.
+    // the root in the largest component put the stem's first node 65–180 mm above the soil,
+    // the stem drawn as one straight line up to it), and the crown is bridged to the trunk.
     let horizontal = |p: &Point3<f64>| distance_from_axis(p, axis_point, up);
     let height = |p: &Point3<f64>| up.dot(&(p - axis_point));
     let candidates: Vec<usize> = match role {
@@ -2405,8 +2405,20 @@ mod tests {
             first.z < 0.02,
             "the stem's first node is at {first}; {stats:?}"
         );
-        // The crown hangs from the trunk.
+        // The crown hangs from the foot's stem.
         let top = nearest_branch(&tree, &Point3::new(0.0, 0.0, 0.25));
+        let mut ancestor = top;
+        for _ in 0..tree.branches.len() {
+            match ancestor.parent {
+                Some(p) => ancestor = &tree.branches[p as usize],
+                None => break,
+            }
+        }
+        assert_eq!(
+            ancestor.id, 0,
+            "the crown's branch {} hangs from no stem",
+            top.id
+        );
         assert!(
             top.cylinder
                 .skeleton
