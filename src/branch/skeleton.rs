@@ -1424,8 +1424,9 @@ fn reanchor_base(
         return None;
     }
     // The branch's line: fitted to its nodes over DIRECTION_LEVELS level widths past the cut
-    // or half its kept length (DIRECTION_NODES at least), through their mean; a chord over the first few nodes turns
-    // with every centroid's noise, and the base is that line extended tens of millimetres.
+    // or half its kept length (DIRECTION_NODES at least), through their mean; a chord over
+    // the first few nodes turns with every centroid's noise, and the base is that line
+    // extended tens of millimetres.
     let window = (DIRECTION_LEVELS * level_width).min(0.5 * crate::util::polyline::length(kept));
     let mut run = 0.0;
     let fitted = 1 + kept
@@ -1829,7 +1830,6 @@ mod tests {
         assert!((u - 1.0).abs() < 1e-12 && (distance - 1.0).abs() < 1e-12);
     }
 
-    /// The default skeleton of points around a vertical axis through the origin.
     /// The branch whose axis passes nearest `point` (a tree has at least its stem).
     fn nearest_branch<'a>(tree: &'a BranchTree, point: &Point3<f64>) -> &'a Branch {
         tree.branches
@@ -1841,6 +1841,7 @@ mod tests {
             .expect("branches")
     }
 
+    /// The default skeleton of points around a vertical axis through the origin.
     fn skeleton_z_up(points: &[Point3<f64>]) -> (BranchTree, SkeletonStats) {
         automatic_skeleton(
             points,
