@@ -275,6 +275,7 @@ pub fn score_skeleton(
         })
         .count();
     SkeletonScores {
+        with_drawn_petioles: None,
         stem_distance_in_radii,
         eligible_branches: eligible.len(),
         matched_branches: matched,

@@ -173,15 +173,97 @@ pub struct Prediction {
     pub leaf_meshes: BTreeMap<i64, TriMesh>,
     pub branch_meshes: usize,
     pub skeleton: Option<Vec<SkeletonRecord>>,
+    /// The petioles the model draws from leaves to the skeleton's branches (straight lines
+    /// from the branch point `report.json` names to the leaf's base; empty without a report).
+    pub drawn_petioles: Vec<SkeletonRecord>,
     /// The compound leaves `report.json` lists (empty without one).
     pub compound_leaves: Vec<crate::branch::compound::CompoundLeaf>,
 }
 
 /// The part of `report.json` the evaluation reads.
 #[derive(Deserialize)]
-struct ReportCompoundLeaves {
+struct ReportParts {
     #[serde(default)]
     compound_leaves: Vec<crate::branch::compound::CompoundLeaf>,
+    #[serde(default)]
+    attachment: Option<ReportAttachment>,
+}
+
+/// The petioles of `report.json`'s attachment and the leaves' bases they end at.
+#[derive(Default, Deserialize)]
+struct ReportAttachment {
+    #[serde(default)]
+    petioles: Vec<ReportPetiole>,
+    #[serde(default)]
+    leaves: Vec<ReportLeafOnBranch>,
+}
+
+#[derive(Deserialize)]
+struct ReportPetiole {
+    leaf: u32,
+    branch: u32,
+    parent_fraction: f64,
+}
+
+#[derive(Deserialize)]
+struct ReportLeafOnBranch {
+    leaf: u32,
+    base_world: [f64; 3],
+}
+
+/// The petioles the model draws, as skeleton records: a straight line from the point at
+/// `parent_fraction` of the arc length along its branch's centreline to its leaf's base. A
+/// petiole whose branch or leaf is not listed is left out.
+fn drawn_petiole_records(
+    skeleton: &[SkeletonRecord],
+    attachment: &ReportAttachment,
+) -> Vec<SkeletonRecord> {
+    let bases: BTreeMap<u32, [f64; 3]> = attachment
+        .leaves
+        .iter()
+        .map(|l| (l.leaf, l.base_world))
+        .collect();
+    attachment
+        .petioles
+        .iter()
+        .filter_map(|petiole| {
+            let branch = skeleton.iter().find(|b| b.id == petiole.branch)?;
+            let base = bases.get(&petiole.leaf)?;
+            let start = point_at_arc_fraction(&branch.centerline, petiole.parent_fraction)?;
+            let length = (Point3::from(*base) - start).norm();
+            Some(SkeletonRecord {
+                id: petiole.leaf,
+                parent: Some(petiole.branch),
+                parent_fraction: petiole.parent_fraction,
+                control_points: vec![start.into(), *base],
+                radius_start: 0.0,
+                radius_end: 0.0,
+                length,
+                centerline: vec![start.into(), *base],
+                observed_length: None,
+                bridged_length: None,
+            })
+        })
+        .collect()
+}
+
+/// The point at a fraction of a polyline's arc length (clamped to its ends).
+fn point_at_arc_fraction(polyline: &[[f64; 3]], fraction: f64) -> Option<Point3<f64>> {
+    let first = Point3::from(*polyline.first()?);
+    let total: f64 = polyline
+        .windows(2)
+        .map(|w| (Point3::from(w[1]) - Point3::from(w[0])).norm())
+        .sum();
+    let mut left = fraction.clamp(0.0, 1.0) * total;
+    for w in polyline.windows(2) {
+        let (a, b) = (Point3::from(w[0]), Point3::from(w[1]));
+        let step = (b - a).norm();
+        if left <= step && step > 0.0 {
+            return Some(a + (b - a) * (left / step));
+        }
+        left -= step;
+    }
+    Some(polyline.last().map_or(first, |p| Point3::from(*p)))
 }
 
 impl Prediction {
@@ -214,17 +296,25 @@ impl Prediction {
             None
         };
         let report_path = out.join("report.json");
-        let compound_leaves = if report_path.is_file() {
-            read_json::<ReportCompoundLeaves>(&report_path)?.compound_leaves
+        let report = if report_path.is_file() {
+            read_json::<ReportParts>(&report_path)?
         } else {
-            Vec::new()
+            ReportParts {
+                compound_leaves: Vec::new(),
+                attachment: None,
+            }
+        };
+        let drawn_petioles = match (&skeleton, &report.attachment) {
+            (Some(skeleton), Some(attachment)) => drawn_petiole_records(skeleton, attachment),
+            _ => Vec::new(),
         };
         Ok(Self {
             points,
             leaf_meshes,
             branch_meshes,
             skeleton,
-            compound_leaves,
+            drawn_petioles,
+            compound_leaves: report.compound_leaves,
         })
     }
 
@@ -239,21 +329,20 @@ impl Prediction {
             }
             mesh.compute_normals();
         }
-        if let Some(skeleton) = &mut self.skeleton {
-            for branch in skeleton {
-                for c in &mut branch.centerline {
-                    let p = similarity.apply(&Point3::from(*c));
-                    *c = [p.x, p.y, p.z];
-                }
-                branch.radius_start *= similarity.scale;
-                branch.radius_end *= similarity.scale;
-                branch.length *= similarity.scale;
-                for length in [&mut branch.observed_length, &mut branch.bridged_length]
-                    .into_iter()
-                    .flatten()
-                {
-                    *length *= similarity.scale;
-                }
+        let drawn = self.drawn_petioles.iter_mut();
+        for branch in self.skeleton.iter_mut().flatten().chain(drawn) {
+            for c in &mut branch.centerline {
+                let p = similarity.apply(&Point3::from(*c));
+                *c = [p.x, p.y, p.z];
+            }
+            branch.radius_start *= similarity.scale;
+            branch.radius_end *= similarity.scale;
+            branch.length *= similarity.scale;
+            for length in [&mut branch.observed_length, &mut branch.bridged_length]
+                .into_iter()
+                .flatten()
+            {
+                *length *= similarity.scale;
             }
         }
     }
@@ -335,6 +424,9 @@ pub struct SkeletonScores {
     pub branch_recall: f64,
     /// Length-weighted scores, branches and petioles apart.
     pub length: SkeletonLengthScores,
+    /// The same scores of the model's whole structure: the skeleton and the petioles drawn
+    /// from its leaves to it (`report.json`'s attachment), which `skeleton.json` leaves out.
+    pub with_drawn_petioles: Option<SkeletonLengthScores>,
 }
 
 /// Length-weighted skeleton scores. A true centreline point is found when the prediction
@@ -596,7 +688,19 @@ pub fn evaluate(
     let skeleton = pred.skeleton.as_ref().map(|skeleton| {
         let petioles = geometry::petiole_ids(&gt.branches, &gt.leaves);
         let surfaces = geometry::TrueSurfaces::new(&gt.surface_samples);
-        geometry::score_skeleton(&gt.branches, &petioles, skeleton, &surfaces)
+        let mut scores = geometry::score_skeleton(&gt.branches, &petioles, skeleton, &surfaces);
+        let whole: Vec<SkeletonRecord> = skeleton
+            .iter()
+            .chain(&pred.drawn_petioles)
+            .cloned()
+            .collect();
+        scores.with_drawn_petioles = Some(geometry::skeleton_length_scores(
+            &gt.branches,
+            &petioles,
+            &whole,
+            &surfaces,
+        ));
+        scores
     });
     let leaflet_rachis: BTreeMap<i64, u32> = gt
         .leaves
@@ -716,6 +820,24 @@ impl EvalReport {
                 k.length.precision,
                 k.length.predicted_length
             );
+            if let Some(w) = &k.with_drawn_petioles {
+                let drawn = w.predicted_length - k.length.predicted_length;
+                let drawn_on = w.precision * w.predicted_length
+                    - k.length.precision * k.length.predicted_length;
+                let _ = writeln!(
+                    s,
+                    "with drawn petioles: petiole recall {:.3}, precision {:.3} of {:.3} m (the petioles drawn from leaves: {:.3} m, {:.0} % on the plant)",
+                    w.petiole_recall,
+                    w.precision,
+                    w.predicted_length,
+                    drawn,
+                    if drawn > 0.0 {
+                        100.0 * drawn_on / drawn
+                    } else {
+                        0.0
+                    }
+                );
+            }
             // Where the precision goes: the branches with the most length off the plant.
             let mut off: Vec<&PredictedBranchScore> = k
                 .length
@@ -778,5 +900,83 @@ impl EvalReport {
             );
         }
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record(id: u32, centerline: Vec<[f64; 3]>) -> SkeletonRecord {
+        SkeletonRecord {
+            id,
+            parent: None,
+            parent_fraction: 0.0,
+            control_points: centerline.clone(),
+            radius_start: 0.01,
+            radius_end: 0.01,
+            length: 0.0,
+            centerline,
+            observed_length: None,
+            bridged_length: None,
+        }
+    }
+
+    #[test]
+    fn a_drawn_petiole_runs_from_its_branch_point_to_its_leaf_base() {
+        // A stem 0.3 tall sampled unevenly (the fraction is of arc length, not of samples).
+        let stem = record(0, vec![[0.0, 0.0, 0.0], [0.0, 0.0, 0.05], [0.0, 0.0, 0.3]]);
+        let attachment = ReportAttachment {
+            petioles: vec![
+                ReportPetiole {
+                    leaf: 7,
+                    branch: 0,
+                    parent_fraction: 0.5,
+                },
+                // A branch the skeleton does not have, and a leaf with no base: left out.
+                ReportPetiole {
+                    leaf: 8,
+                    branch: 3,
+                    parent_fraction: 0.5,
+                },
+                ReportPetiole {
+                    leaf: 9,
+                    branch: 0,
+                    parent_fraction: 1.0,
+                },
+            ],
+            leaves: vec![
+                ReportLeafOnBranch {
+                    leaf: 7,
+                    base_world: [0.1, 0.0, 0.15],
+                },
+                ReportLeafOnBranch {
+                    leaf: 8,
+                    base_world: [0.0, 0.1, 0.15],
+                },
+            ],
+        };
+        let drawn = drawn_petiole_records(&[stem], &attachment);
+        assert_eq!(drawn.len(), 1, "{drawn:?}");
+        let petiole = &drawn[0];
+        assert_eq!((petiole.id, petiole.parent), (7, Some(0)));
+        let start = Point3::from(petiole.centerline[0]);
+        assert!(
+            (start - Point3::new(0.0, 0.0, 0.15)).norm() < 1e-12,
+            "{start:?}"
+        );
+        assert_eq!(petiole.centerline[1], [0.1, 0.0, 0.15]);
+        assert!((petiole.length - 0.1).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_point_at_an_arc_fraction_is_clamped_to_the_polyline() {
+        let line = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 3.0, 0.0]];
+        let at = |f: f64| point_at_arc_fraction(&line, f).expect("a point");
+        assert!((at(0.25) - Point3::new(1.0, 0.0, 0.0)).norm() < 1e-12);
+        assert!((at(0.5) - Point3::new(1.0, 1.0, 0.0)).norm() < 1e-12);
+        assert_eq!(at(-1.0), Point3::new(0.0, 0.0, 0.0));
+        assert_eq!(at(2.0), Point3::new(1.0, 3.0, 0.0));
+        assert!(point_at_arc_fraction(&[], 0.5).is_none());
     }
 }
