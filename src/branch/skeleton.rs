@@ -681,11 +681,12 @@ const TUBE_ROUNDNESS: f64 = 0.3;
 /// before the last quarter of its length; on medium plants 9 of 10 such bridges met their
 /// piece in its last quarter, 7 of them with at least 80 % of the bridge on the plant. A
 /// piece shorter than the shortest kept branch or with no such point is left out. So is a
-/// flat piece (less round than [`TUBE_ROUNDNESS`]) whose bridge would be longer than its main branch: stereo smears a
-/// petiole into a flat band too, but then beside the tree, while a band of leaf edge or halo
-/// hangs off the foliage, far from every axis (from photos of broadleaf seeds 1–3 and 11–13,
-/// such pieces were 9 % on the plant, their bridges included). Nor is a piece that hangs: one
-/// whose main branch runs downward from its root, so that its backward direction climbs. An
+/// flat piece (less round than [`TUBE_ROUNDNESS`]) whose bridge would be longer than its main
+/// branch: stereo smears a petiole into a flat band too, but then beside the tree, while a
+/// band of leaf edge or halo hangs off the foliage, far from every axis (from photos of
+/// broadleaf seeds 1–3 and 11–13, such pieces were 9 % on the plant, their bridges included).
+/// Nor is a piece that hangs: one whose main branch runs downward from its root, so that its
+/// backward direction climbs. An
 /// organ seen in part rises from the tree it grows out of; what hangs off the foliage with
 /// nothing seen between is a leaf edge, a leaf's midrib or stereo's halo below a leaf (from
 /// photos of 16 broadleaf plants, 15 % of such pieces' length and 14 % of their bridges' lay
