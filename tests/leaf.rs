@@ -123,9 +123,25 @@ fn reconstruct_writes_every_output_and_a_report() {
         fitted,
         "{counts}"
     );
+    // Each drawn petiole says how much of it the points show and how much is a guess, and
+    // the report sums them.
+    let (mut observed, mut bridged) = (0.0, 0.0);
     for petiole in report["attachment"]["petioles"].as_array().unwrap() {
-        assert!(petiole["length"].as_f64().unwrap() > 0.0, "{petiole}");
+        let length = petiole["length"].as_f64().unwrap();
+        assert!(length > 0.0, "{petiole}");
+        let seen = petiole["observed_length"].as_f64().unwrap();
+        let guessed = petiole["bridged_length"].as_f64().unwrap();
+        assert!(seen >= 0.0 && guessed >= 0.0, "{petiole}");
+        assert!(
+            ((seen + guessed) - length).abs() <= 0.01 * length,
+            "{petiole}"
+        );
+        observed += seen;
+        bridged += guessed;
     }
+    let support = &report["petiole_support"];
+    assert!((support["observed_length"].as_f64().unwrap() - observed).abs() < 1e-9);
+    assert!((support["bridged_length"].as_f64().unwrap() - bridged).abs() < 1e-9);
     // The OBJ's faces index existing vertices and use the atlas material.
     let obj = std::fs::read_to_string(out.join("plant.obj")).unwrap();
     let vertices = obj.lines().filter(|l| l.starts_with("v ")).count();
@@ -147,6 +163,13 @@ fn reconstructed_leaves_meet_the_accuracy_targets() {
     // The automatic skeleton follows the stem and finds the petioles.
     let skeleton = &eval["skeleton"];
     eprintln!("skeleton: {skeleton}");
+    // The model's structure is scored too: the skeleton and the petioles drawn to it.
+    let whole = &skeleton["with_drawn_petioles"];
+    assert!(
+        whole["predicted_length"].as_f64().unwrap()
+            >= skeleton["length"]["predicted_length"].as_f64().unwrap(),
+        "{skeleton}"
+    );
     assert!(
         skeleton["stem_distance_in_radii"].as_f64().unwrap() <= 1.0,
         "{skeleton}"

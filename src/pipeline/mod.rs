@@ -571,6 +571,12 @@ pub struct PetioleRecord {
     pub branch: u32,
     pub parent_fraction: f64,
     pub length: f64,
+    /// Length along which points show the petiole, as for branches ([`BranchSupport`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub observed_length: Option<f64>,
+    /// Length drawn where no point is: a straight line guessed across a gap.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bridged_length: Option<f64>,
 }
 
 /// A posed (synthesized) leaf in the report.
@@ -604,16 +610,23 @@ pub struct AttachmentRecord {
 }
 
 impl AttachmentRecord {
-    fn of(attachment: &Attachment) -> Self {
+    /// The record of an attachment, with each petiole's support (`petiole_support`, by leaf
+    /// id; see [`petiole_support`]).
+    fn of(attachment: &Attachment, petiole_support: &[BranchSupport]) -> Self {
         Self {
             petioles: attachment
                 .petioles
                 .iter()
-                .map(|p| PetioleRecord {
-                    leaf: p.leaf,
-                    branch: p.branch,
-                    parent_fraction: p.parent_fraction,
-                    length: p.length,
+                .map(|p| {
+                    let support = petiole_support.iter().find(|s| s.id == p.leaf);
+                    PetioleRecord {
+                        leaf: p.leaf,
+                        branch: p.branch,
+                        parent_fraction: p.parent_fraction,
+                        length: p.length,
+                        observed_length: support.map(|s| s.observed_length),
+                        bridged_length: support.map(|s| s.bridged_length),
+                    }
                 })
                 .collect(),
             posed: attachment
@@ -703,6 +716,10 @@ pub struct ReconstructionReport {
     /// How much of the branches the points show (per branch in `skeleton.json`).
     #[serde(default)]
     pub skeleton_support: SupportSummary,
+    /// The same of the petioles drawn from leaves to branches (`mostly_bridged` lists leaf
+    /// ids; per petiole in `attachment.petioles`).
+    #[serde(default)]
+    pub petiole_support: SupportSummary,
     pub attachment: AttachmentRecord,
     /// Compound leaves: a rachis (branch id) and its leaflets (segment ids).
     #[serde(default)]
@@ -733,6 +750,30 @@ impl ReconstructionReport {
     }
 }
 
+/// How much of each petiole drawn from a leaf to a branch the points show, as
+/// [`plant_branch_support`] measures branches; each support's `id` is the petiole's leaf.
+fn petiole_support(state: &PlantState, attachment: &Attachment) -> Vec<BranchSupport> {
+    let tree = BranchTree {
+        branches: attachment
+            .petioles
+            .iter()
+            .map(|p| crate::branch::Branch {
+                id: p.leaf,
+                parent: None,
+                parent_fraction: 0.0,
+                cylinder: p.cylinder.clone(),
+                leaf_at_tip: false,
+            })
+            .collect(),
+    };
+    plant_branch_support(
+        state.segmentation,
+        state.labels,
+        &tree,
+        &state.skeleton.options.tube,
+    )
+}
+
 /// Writes every output of a plant whose leaves were reconstructed into `out`:
 /// `skeleton.json`, `plant.glb`, `plant.obj` (+ materials, atlas), `segmentation.ply`,
 /// `segments.json` and `report.json`, each atomically.
@@ -758,6 +799,7 @@ pub fn write_plant(
         &state.skeleton.options.tube,
     );
     files::write_skeleton(&branches, &support, out)?;
+    let petiole_support = petiole_support(state, &attachment);
     let clock = Instant::now();
     let export = model.export(out).map_err(|e| output_error(out, e))?;
     let mut boundaries = state.boundaries.clone();
@@ -822,7 +864,8 @@ pub fn write_plant(
         skeleton: state.skeleton.stats.clone(),
         skeleton_error: state.skeleton.error.clone(),
         skeleton_support: SupportSummary::new(&support),
-        attachment: AttachmentRecord::of(&attachment),
+        petiole_support: SupportSummary::new(&petiole_support),
+        attachment: AttachmentRecord::of(&attachment, &petiole_support),
         compound_leaves,
         template: leaves.template_source.and_then(|t| {
             Some(TemplateRecord {
