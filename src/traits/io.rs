@@ -424,6 +424,8 @@ mod tests {
             branch,
             parent_fraction,
             length,
+            observed_length: None,
+            bridged_length: None,
         }
     }
 
