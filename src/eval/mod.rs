@@ -212,8 +212,9 @@ struct ReportLeafOnBranch {
 }
 
 /// The petioles the model draws, as skeleton records: a straight line from the point at
-/// `parent_fraction` of the arc length along its branch's centreline to its leaf's base. A
-/// petiole whose branch or leaf is not listed is left out.
+/// `parent_fraction` of the arc length along its branch's centreline to its leaf's base,
+/// numbered as the model numbers them (after the skeleton's last id, in the report's order).
+/// A petiole whose branch or leaf is not listed is left out.
 fn drawn_petiole_records(
     skeleton: &[SkeletonRecord],
     attachment: &ReportAttachment,
@@ -223,16 +224,18 @@ fn drawn_petiole_records(
         .iter()
         .map(|l| (l.leaf, l.base_world))
         .collect();
+    let next_id = skeleton.iter().map(|b| b.id + 1).max().unwrap_or(0);
     attachment
         .petioles
         .iter()
-        .filter_map(|petiole| {
+        .zip(next_id..)
+        .filter_map(|(petiole, id)| {
             let branch = skeleton.iter().find(|b| b.id == petiole.branch)?;
             let base = bases.get(&petiole.leaf)?;
             let start = point_at_arc_fraction(&branch.centerline, petiole.parent_fraction)?;
             let length = (Point3::from(*base) - start).norm();
             Some(SkeletonRecord {
-                id: petiole.leaf,
+                id,
                 parent: Some(petiole.branch),
                 parent_fraction: petiole.parent_fraction,
                 control_points: vec![start.into(), *base],
@@ -959,7 +962,8 @@ mod tests {
         let drawn = drawn_petiole_records(&[stem], &attachment);
         assert_eq!(drawn.len(), 1, "{drawn:?}");
         let petiole = &drawn[0];
-        assert_eq!((petiole.id, petiole.parent), (7, Some(0)));
+        // Numbered after the skeleton's branches, as the model numbers its petioles.
+        assert_eq!((petiole.id, petiole.parent), (1, Some(0)));
         let start = Point3::from(petiole.centerline[0]);
         assert!(
             (start - Point3::new(0.0, 0.0, 0.15)).norm() < 1e-12,
