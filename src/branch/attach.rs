@@ -32,6 +32,19 @@ pub struct Petiole {
     pub length: f64,
 }
 
+impl Petiole {
+    /// The petiole as a branch of the model, numbered `id`, hanging from its branch.
+    pub fn as_branch(&self, id: u32) -> super::Branch {
+        super::Branch {
+            id,
+            parent: Some(self.branch),
+            parent_fraction: self.parent_fraction,
+            cylinder: self.cylinder.clone(),
+            leaf_at_tip: false,
+        }
+    }
+}
+
 /// Why a synthesized leaf is there.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]

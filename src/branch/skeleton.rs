@@ -2485,16 +2485,13 @@ mod tests {
         points.extend(tube(&[from, to], 0.002, 5_000.0, &mut rng));
         let (tree, stats) = skeleton_z_up(&points);
         assert_eq!(stats.pieces_bridged, 2, "{stats:?}");
-        let second = tree
-            .branches
-            .iter()
-            .min_by(|a, b| {
-                let near = |b: &Branch| b.cylinder.skeleton.distance_to(&to);
-                near(a).total_cmp(&near(b))
-            })
-            .expect("branches");
-        assert_eq!(second.parent, Some(0), "{:?}", second.parent);
-        let start = second.cylinder.skeleton.point_at_fraction(0.0);
+        assert_starts_on_the_stem(nearest_branch(&tree, &to));
+    }
+
+    /// A branch hangs from the stem (id 0) and starts within 1 cm of its axis.
+    fn assert_starts_on_the_stem(branch: &Branch) {
+        assert_eq!(branch.parent, Some(0), "{:?}", branch.parent);
+        let start = branch.cylinder.skeleton.point_at_fraction(0.0);
         assert!(start.coords.xy().norm() < 0.01, "starts at {start:?}");
     }
 
@@ -2513,9 +2510,7 @@ mod tests {
         let petiole = nearest_branch(&tree, &(base + (tip - base) * 0.7));
         let piece = nearest_branch(&tree, &(from + (to - from) * 0.5));
         assert_ne!(piece.id, petiole.id);
-        assert_eq!(piece.parent, Some(0), "{:?}", piece.parent);
-        let start = piece.cylinder.skeleton.point_at_fraction(0.0);
-        assert!(start.coords.xy().norm() < 0.01, "starts at {start:?}");
+        assert_starts_on_the_stem(piece);
     }
 
     #[test]

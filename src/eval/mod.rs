@@ -212,7 +212,7 @@ struct ReportLeafOnBranch {
 }
 
 /// The petioles the model draws, as skeleton records: a straight line from the point at
-/// `parent_fraction` of the arc length along its branch's centreline to its leaf's base,
+/// `parent_fraction` of the arc length along its branch's spline to its leaf's base,
 /// numbered as the model numbers them (after the skeleton's last id, in the report's order).
 /// A petiole whose branch or leaf is not listed is left out.
 fn drawn_petiole_records(
@@ -232,7 +232,15 @@ fn drawn_petiole_records(
         .filter_map(|(petiole, id)| {
             let branch = skeleton.iter().find(|b| b.id == petiole.branch)?;
             let base = bases.get(&petiole.leaf)?;
-            let start = point_at_arc_fraction(&branch.centerline, petiole.parent_fraction)?;
+            // Where the model starts it: on the branch's spline, by arc length.
+            let control = branch
+                .control_points
+                .iter()
+                .map(|c| Point3::from(*c))
+                .collect();
+            let start = crate::branch::Spline::new(control)
+                .ok()?
+                .point_at_fraction(petiole.parent_fraction.clamp(0.0, 1.0));
             let length = (Point3::from(*base) - start).norm();
             Some(SkeletonRecord {
                 id,
@@ -248,25 +256,6 @@ fn drawn_petiole_records(
             })
         })
         .collect()
-}
-
-/// The point at a fraction of a polyline's arc length (clamped to its ends).
-fn point_at_arc_fraction(polyline: &[[f64; 3]], fraction: f64) -> Option<Point3<f64>> {
-    let first = Point3::from(*polyline.first()?);
-    let total: f64 = polyline
-        .windows(2)
-        .map(|w| (Point3::from(w[1]) - Point3::from(w[0])).norm())
-        .sum();
-    let mut left = fraction.clamp(0.0, 1.0) * total;
-    for w in polyline.windows(2) {
-        let (a, b) = (Point3::from(w[0]), Point3::from(w[1]));
-        let step = (b - a).norm();
-        if left <= step && step > 0.0 {
-            return Some(a + (b - a) * (left / step));
-        }
-        left -= step;
-    }
-    Some(polyline.last().map_or(first, |p| Point3::from(*p)))
 }
 
 impl Prediction {
@@ -927,7 +916,8 @@ mod tests {
 
     #[test]
     fn a_drawn_petiole_runs_from_its_branch_point_to_its_leaf_base() {
-        // A stem 0.3 tall sampled unevenly (the fraction is of arc length, not of samples).
+        // A stem 0.3 tall through uneven control points (the fraction is of arc length, not of
+        // control points).
         let stem = record(0, vec![[0.0, 0.0, 0.0], [0.0, 0.0, 0.05], [0.0, 0.0, 0.3]]);
         let attachment = ReportAttachment {
             petioles: vec![
@@ -964,23 +954,13 @@ mod tests {
         let petiole = &drawn[0];
         // Numbered after the skeleton's branches, as the model numbers its petioles.
         assert_eq!((petiole.id, petiole.parent), (1, Some(0)));
+        // Halfway up the stem, to the spline's arc-length table (0.1 mm on 0.3).
         let start = Point3::from(petiole.centerline[0]);
         assert!(
-            (start - Point3::new(0.0, 0.0, 0.15)).norm() < 1e-12,
+            (start - Point3::new(0.0, 0.0, 0.15)).norm() < 1e-4,
             "{start:?}"
         );
         assert_eq!(petiole.centerline[1], [0.1, 0.0, 0.15]);
-        assert!((petiole.length - 0.1).abs() < 1e-12);
-    }
-
-    #[test]
-    fn the_point_at_an_arc_fraction_is_clamped_to_the_polyline() {
-        let line = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 3.0, 0.0]];
-        let at = |f: f64| point_at_arc_fraction(&line, f).expect("a point");
-        assert!((at(0.25) - Point3::new(1.0, 0.0, 0.0)).norm() < 1e-12);
-        assert!((at(0.5) - Point3::new(1.0, 1.0, 0.0)).norm() < 1e-12);
-        assert_eq!(at(-1.0), Point3::new(0.0, 0.0, 0.0));
-        assert_eq!(at(2.0), Point3::new(1.0, 3.0, 0.0));
-        assert!(point_at_arc_fraction(&[], 0.5).is_none());
+        assert!((petiole.length - 0.1).abs() < 1e-4);
     }
 }

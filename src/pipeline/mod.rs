@@ -476,13 +476,7 @@ pub fn assemble_plant(state: &PlantState, leaves: &LeafReconstruction) -> Assemb
             .petioles
             .iter()
             .enumerate()
-            .map(|(k, p)| crate::branch::Branch {
-                id: branches.next_id() + k as u32,
-                parent: Some(p.branch),
-                parent_fraction: p.parent_fraction,
-                cylinder: p.cylinder.clone(),
-                leaf_at_tip: false,
-            })
+            .map(|(k, p)| p.as_branch(branches.next_id() + k as u32))
             .collect(),
     };
     branches_out.extend(model_branches(&petiole_tree));
@@ -757,13 +751,7 @@ fn petiole_support(state: &PlantState, attachment: &Attachment) -> Vec<BranchSup
         branches: attachment
             .petioles
             .iter()
-            .map(|p| crate::branch::Branch {
-                id: p.leaf,
-                parent: None,
-                parent_fraction: 0.0,
-                cylinder: p.cylinder.clone(),
-                leaf_at_tip: false,
-            })
+            .map(|p| p.as_branch(p.leaf))
             .collect(),
     };
     plant_branch_support(
