@@ -7,7 +7,9 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::prune::{BarTest, RimTest, remove_barless_ends, remove_leaf_rims};
+use super::prune::{
+    BarTest, RimTest, TwinTest, remove_barless_ends, remove_leaf_rims, remove_twin_siblings,
+};
 use super::skeleton::{
     PlantBase, SkeletonError, SkeletonOptions, SkeletonStats, automatic_skeleton_from,
 };
@@ -245,6 +247,7 @@ pub struct PlantSkeletonOptions {
     pub skeleton: SkeletonOptions,
     pub rims: RimTest,
     pub bars: BarTest,
+    pub twins: TwinTest,
 }
 
 /// The pot of the labels, when at least [`MIN_POT_POINTS`] points are labelled pot
@@ -544,6 +547,13 @@ pub fn automatic_plant_skeleton(
         &input.thin_organ,
         stats.spacing,
         &options.bars,
+    );
+    stats.twins_pruned = remove_twin_siblings(
+        &mut tree,
+        &input.points,
+        stats.level_width,
+        stats.spacing,
+        &options.twins,
     );
     stats.branches = tree.branches.len();
     Ok((tree, stats))

@@ -84,6 +84,9 @@ pub struct SkeletonStats {
     /// Side branches removed as showing no bar in the photos ([`super::prune::BarTest`]).
     #[serde(default)]
     pub barless_pruned: usize,
+    /// Side branches removed as twins of a longer sibling ([`super::prune::TwinTest`]).
+    #[serde(default)]
+    pub twins_pruned: usize,
     /// Rooted over a soil-line point ([`PlantBase::SoilLine`]: no pot said where the stem
     /// stands), not at a known stem foot.
     #[serde(default)]
