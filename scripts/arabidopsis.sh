@@ -3,7 +3,7 @@
 # Arabidopsis on a circular path of radius 0.3 m): `frond reconstruct PHOTOS` (SfM, densify,
 # reconstruction), then `frond phyllotaxis` aligns the organ sequence along the main stem with
 # the dataset's manual measures.json (scale from the camera circle).
-# Usage: scripts/arabidopsis.sh [WORK_DIR]   (default target/arabidopsis; about 2 min on 2
+# Usage: scripts/arabidopsis.sh [WORK_DIR]   (default target/arabidopsis; about 7 min on 2
 # cores; an existing WORK_DIR/out/report.json is reused: delete it to reconstruct again)
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
