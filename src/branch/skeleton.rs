@@ -1911,6 +1911,27 @@ mod tests {
         points
     }
 
+    /// Every twentieth of `branch`'s axis lies within `tolerance` of the polyline `truth`.
+    fn assert_follows(
+        branch: &Branch,
+        truth: &[Point3<f64>],
+        tolerance: f64,
+        stats: &SkeletonStats,
+    ) {
+        for k in 0..=20 {
+            let p = branch.cylinder.skeleton.point_at_fraction(k as f64 / 20.0);
+            let off = truth
+                .windows(2)
+                .map(|w| crate::branch::spline::point_segment_distance(&p, &w[0], &w[1]))
+                .fold(f64::INFINITY, f64::min);
+            assert!(
+                off < tolerance,
+                "point {p} of branch {} is {off} off its truth; {stats:?}",
+                branch.id
+            );
+        }
+    }
+
     #[test]
     fn a_stem_off_the_cameras_axis_is_rooted_at_its_foot_over_a_soil_line() {
         let mut rng = Rng::seed_from(11);
@@ -1937,17 +1958,7 @@ mod tests {
             Point3::new(0.2, 0.0, 0.4),
             Point3::new(0.0, 0.0, 1.0),
         ];
-        for k in 0..=20 {
-            let p = main.cylinder.skeleton.point_at_fraction(k as f64 / 20.0);
-            let off = truth
-                .windows(2)
-                .map(|w| crate::branch::spline::point_segment_distance(&p, &w[0], &w[1]))
-                .fold(f64::INFINITY, f64::min);
-            assert!(
-                off < 0.02,
-                "stem point {p} is {off} off the stem; {stats:?}"
-            );
-        }
+        assert_follows(main, &truth, 0.02, &stats);
         // Both side branches hang from it (besides spurs of its ring).
         let sides = tree
             .branches
@@ -1995,17 +2006,7 @@ mod tests {
         );
         // From the soil line to the foot, then up the stem.
         let truth = [Point3::origin(), foot, top];
-        for k in 0..=20 {
-            let p = main.cylinder.skeleton.point_at_fraction(k as f64 / 20.0);
-            let off = truth
-                .windows(2)
-                .map(|w| crate::branch::spline::point_segment_distance(&p, &w[0], &w[1]))
-                .fold(f64::INFINITY, f64::min);
-            assert!(
-                off < 0.01,
-                "stem point {p} is {off} off the stem; {stats:?}"
-            );
-        }
+        assert_follows(main, &truth, 0.01, &stats);
         // Both side branches hang from it.
         let sides = tree
             .branches
