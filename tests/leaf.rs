@@ -428,6 +428,45 @@ fn keys(value: &Value, nested: &[&str]) -> Vec<String> {
     keys
 }
 
+/// `segmentation.ply`'s `segment_id` names every point's segment: its points per segment are
+/// the `points` of that segment in `segments.json`, and a point has a `leaf_id` exactly when
+/// its segment is labelled leaf there, the same id.
+#[test]
+fn the_segment_of_every_point_agrees_with_segments_json() {
+    let out = reconstruction();
+    let ply = frond::scene::ply::read_ply(&out.join("segmentation.ply")).unwrap();
+    let vertex = ply.element("vertex").unwrap();
+    let leaf_ids = &vertex.column("leaf_id").unwrap().values;
+    let segment_ids = &vertex.column("segment_id").unwrap().values;
+    let segments = read_json(&out.join("segments.json"));
+    let mut count_of: std::collections::BTreeMap<i64, u64> = Default::default();
+    for &s in segment_ids {
+        *count_of.entry(s as i64).or_default() += 1;
+    }
+    let records = segments["segments"].as_array().unwrap();
+    let labels: std::collections::BTreeMap<i64, &str> = records
+        .iter()
+        .map(|r| (r["id"].as_i64().unwrap(), r["label"].as_str().unwrap()))
+        .collect();
+    for record in records {
+        let id = record["id"].as_i64().unwrap();
+        assert_eq!(
+            count_of.get(&id).copied().unwrap_or(0),
+            record["points"].as_u64().unwrap(),
+            "segment {id}"
+        );
+    }
+    assert!(labels.values().any(|l| *l != "leaf"), "{labels:?}");
+    for (&leaf, &segment) in leaf_ids.iter().zip(segment_ids) {
+        let label = labels.get(&(segment as i64)).copied();
+        if label == Some("leaf") {
+            assert_eq!(leaf, segment);
+        } else {
+            assert_eq!(leaf, -1.0, "segment {segment} ({label:?})");
+        }
+    }
+}
+
 #[test]
 fn the_readme_names_every_field_the_outputs_hold() {
     let out = reconstruction();

@@ -108,7 +108,7 @@ fn score_prediction(relabel: impl Fn(usize, i64) -> i64) -> EvalReport {
     let out = tempfile::tempdir().unwrap();
     write_segmentation_ply(
         &out.path().join("segmentation.ply"),
-        &segmentation_ply(&positions, &colors, ("point_id", &ids), &labels),
+        &segmentation_ply(&positions, &colors, ("point_id", &ids), &labels, &labels),
     )
     .unwrap();
     let meshes: Vec<(String, &TriMesh)> = truth

@@ -18,13 +18,16 @@ use crate::scene::ply::{Column, Element, Ply, ScalarType, encode_ply_binary};
 use crate::util::atomic::write_atomic;
 
 /// The labelled point cloud of the output contract (`segmentation.ply`): the input points with
-/// `x y z red green blue`, `leaf_id` (−1 = not a leaf) and their ids in the input under the
-/// column name given (`point_id` for COLMAP point3D ids).
+/// `x y z red green blue`, `leaf_id` (−1 = not a leaf), `segment_id` (the segment of every
+/// label, pot, stem and other as well as leaf, whose label `segments.json` gives; −1 = in no
+/// segment) and their ids in the input under the column name given (`point_id` for COLMAP
+/// point3D ids).
 pub fn segmentation_ply(
     positions: &[Point3<f64>],
     colors: &[[u8; 3]],
     (id_column, point_ids): (&str, &[u64]),
     leaf_ids: &[i64],
+    segment_ids: &[i64],
 ) -> Ply {
     let n = positions.len();
     let coordinate = |name: &str, axis: usize| {
@@ -42,7 +45,9 @@ pub fn segmentation_ply(
         )
     };
     Ply {
-        comments: vec!["frond segmentation: leaf_id -1 = not a leaf".into()],
+        comments: vec![
+            "frond segmentation: leaf_id -1 = not a leaf, segment_id -1 = in no segment".into(),
+        ],
         elements: vec![Element {
             name: "vertex".into(),
             count: n,
@@ -57,6 +62,11 @@ pub fn segmentation_ply(
                     "leaf_id",
                     ScalarType::I32,
                     leaf_ids.iter().map(|&l| l as f64).collect(),
+                ),
+                Column::scalar(
+                    "segment_id",
+                    ScalarType::I32,
+                    segment_ids.iter().map(|&s| s as f64).collect(),
                 ),
                 Column::scalar(
                     id_column,

@@ -193,6 +193,12 @@ pub fn write_segmentation(
         &points.colors,
         (id_column, &points.point_ids),
         &state.labels.leaf_ids(),
+        &state
+            .labels
+            .segment_of
+            .iter()
+            .map(|&s| s as i64)
+            .collect::<Vec<_>>(),
     );
     let ply_path = out.join(SEGMENTATION_FILE);
     write_segmentation_ply(&ply_path, &ply).map_err(|e| output_error(&ply_path, e))?;

@@ -358,6 +358,43 @@ pub fn radial_mean_and_spread(
     (mean, spread)
 }
 
+/// How far points reach around the vertical axis through `axis_point` (along `up`): the
+/// standard deviation of their arc length about it, each point's angle from the points' mean
+/// direction from the axis times their mean distance from it. A piece of a surface of
+/// revolution reaches around the axis further than its distances from it spread; a blob beside
+/// the axis (a piece of a stem, a leaf) reaches around about as far as it spreads. `NaN` for
+/// no points; 0 when they all lie on the axis.
+pub fn tangential_spread(
+    points: &[Point3<f64>],
+    axis_point: &Point3<f64>,
+    up: &Vector3<f64>,
+) -> f64 {
+    let radial: Vec<Vector3<f64>> = points
+        .iter()
+        .map(|p| {
+            let d = p - axis_point;
+            d - up * up.dot(&d)
+        })
+        .collect();
+    let n = radial.len() as f64;
+    let mean_radius = radial.iter().map(|r| r.norm()).sum::<f64>() / n;
+    let Some(mean_direction) = radial
+        .iter()
+        .filter_map(|r| r.try_normalize(1e-12))
+        .sum::<Vector3<f64>>()
+        .try_normalize(1e-12)
+    else {
+        return if points.is_empty() { f64::NAN } else { 0.0 };
+    };
+    let side = up.cross(&mean_direction);
+    let arcs: Vec<f64> = radial
+        .iter()
+        .map(|r| r.dot(&side).atan2(r.dot(&mean_direction)) * mean_radius)
+        .collect();
+    let mean_arc = arcs.iter().sum::<f64>() / n;
+    (arcs.iter().map(|a| (a - mean_arc).powi(2)).sum::<f64>() / n).sqrt()
+}
+
 /// The points that vote for the pot's wall ([`pot_from_points`]): every point of the plant's
 /// foreground (plant or stem class). Labels often give only pieces of the wall; what else
 /// stands at the wall's heights is outvoted by the wall.
@@ -487,6 +524,57 @@ mod tests {
             pot_from_points(&wall, &voters(stem(0.0)), &up, &centre),
             None
         );
+    }
+
+    #[test]
+    fn an_arc_reaches_round_the_axis_and_a_blob_beside_it_does_not() {
+        let up = Vector3::z();
+        let axis = Point3::new(0.1, -0.2, 0.0);
+        // 101 points evenly along an arc of 60° at radius 0.5 about the axis, at any heights:
+        // arc lengths uniform over 0.5·π/3, standard deviation that over √12 (within the
+        // discrete sum's 1 %).
+        let arc: Vec<Point3<f64>> = (0..=100)
+            .map(|k| {
+                let a = 1.0 + std::f64::consts::FRAC_PI_3 * (k as f64 / 100.0 - 0.5);
+                axis + Vector3::new(0.5 * a.cos(), 0.5 * a.sin(), 0.01 * k as f64)
+            })
+            .collect();
+        let expected = 0.5 * std::f64::consts::FRAC_PI_3 / 12f64.sqrt();
+        let spread = tangential_spread(&arc, &axis, &up);
+        assert!(
+            (spread / expected - 1.0).abs() < 0.01,
+            "{spread} {expected}"
+        );
+        // The arc turned to centre on the angle π, where atan2 wraps: the same.
+        let turn = std::f64::consts::PI - 1.0;
+        let across_pi: Vec<Point3<f64>> = arc
+            .iter()
+            .map(|p| {
+                let d = p - axis;
+                let (sin, cos) = turn.sin_cos();
+                axis + Vector3::new(d.x * cos - d.y * sin, d.x * sin + d.y * cos, d.z)
+            })
+            .collect();
+        let turned = tangential_spread(&across_pi, &axis, &up);
+        assert!((turned / spread - 1.0).abs() < 1e-9, "{turned} {spread}");
+        // A square blob 2 cm across, 0.5 from the axis: it reaches round the axis about as far
+        // as it spreads across (uniform over 2 cm: 0.02/√12).
+        let blob: Vec<Point3<f64>> = (0..=20)
+            .flat_map(|i| {
+                (0..=20).map(move |j| {
+                    axis + Vector3::new(
+                        0.5 + 0.001 * (i as f64 - 10.0),
+                        0.001 * (j as f64 - 10.0),
+                        0.0,
+                    )
+                })
+            })
+            .collect();
+        let across = 0.02 / 12f64.sqrt();
+        let spread = tangential_spread(&blob, &axis, &up);
+        assert!((spread / across - 1.0).abs() < 0.15, "{spread} {across}");
+        assert!(tangential_spread(&[], &axis, &up).is_nan());
+        assert_eq!(tangential_spread(&[axis, axis], &axis, &up), 0.0);
     }
 
     #[test]
