@@ -251,16 +251,26 @@ pub struct PlantSkeletonOptions {
 }
 
 /// The pot of the labels, when at least [`MIN_POT_POINTS`] points are labelled pot
-/// ([`pot_from_points`], with the foreground's [`crate::segment::pot::wall_voters`]).
+/// ([`pot_from_points`], with the foreground's [`crate::segment::pot::wall_voters`]) and the
+/// leaves stand above its rim ([`crate::segment::pot::leaves_above_the_rim`]).
 pub fn pot_shape(segmentation: &Segmentation, labels: &Labels) -> Option<PotShape> {
     let foreground = &segmentation.foreground;
     let positions = &segmentation.points.positions;
-    let pot: Vec<Point3<f64>> = (0..positions.len())
-        .filter(|&i| labels.label_of_point(i) == Some(SegmentLabel::Pot))
-        .map(|i| positions[i])
-        .collect();
+    let labelled = |label: SegmentLabel| -> Vec<Point3<f64>> {
+        (0..positions.len())
+            .filter(|&i| labels.label_of_point(i) == Some(label))
+            .map(|i| positions[i])
+            .collect()
+    };
     let voters = crate::segment::pot::wall_voters(positions, foreground);
-    pot_from_points(&pot, &voters, &foreground.up, &foreground.plant_center)
+    let pot = pot_from_points(
+        &labelled(SegmentLabel::Pot),
+        &voters,
+        &foreground.up,
+        &foreground.plant_center,
+    )?;
+    crate::segment::pot::leaves_above_the_rim(&pot, &labelled(SegmentLabel::Leaf), &foreground.up)
+        .then_some(pot)
 }
 
 /// Where the plant leaves the soil. With a pot, the soil surface on its axis

@@ -797,7 +797,9 @@ fn label_photo_inconsistent(
 /// the pot found from the segments labelled pot and the foreground's plant points (see
 /// [`super::pot::pot_from_points`]); the segmentation's own pot test measures distances from the
 /// cameras' axis, which passes 1–8 cm from a pot's axis on synthetic photos, so a piece of the
-/// wall seen from one side can pass as a leaf. Returns how many segments it relabelled.
+/// wall seen from one side can pass as a leaf. Nothing is relabelled where the leaves that
+/// are not on the wall do not stand above the rim ([`super::pot::leaves_above_the_rim`]).
+/// Returns how many segments it relabelled.
 fn label_pot_wall(
     segments: &mut [Segment],
     positions: &[Point3<f64>],
@@ -816,17 +818,32 @@ fn label_pot_wall(
     ) else {
         return 0;
     };
+    let on_the_wall: Vec<bool> = segments
+        .iter()
+        .map(|segment| {
+            matches!(segment.label, SegmentLabel::Leaf | SegmentLabel::Other) && {
+                let members: Vec<Point3<f64>> = segment
+                    .points
+                    .iter()
+                    .map(|&i| positions[i as usize])
+                    .collect();
+                super::pot::on_the_wall(&members, &pot, &foreground.up)
+            }
+        })
+        .collect();
+    // The leaves that stay leaves must stand above the pot's rim, or it is no pot.
+    let leaves: Vec<Point3<f64>> = segments
+        .iter()
+        .zip(&on_the_wall)
+        .filter(|(s, wall)| s.label == SegmentLabel::Leaf && !**wall)
+        .flat_map(|(s, _)| s.points.iter().map(|&i| positions[i as usize]))
+        .collect();
+    if !super::pot::leaves_above_the_rim(&pot, &leaves, &foreground.up) {
+        return 0;
+    }
     let mut relabelled = 0;
-    for segment in segments.iter_mut() {
-        if !matches!(segment.label, SegmentLabel::Leaf | SegmentLabel::Other) {
-            continue;
-        }
-        let members: Vec<Point3<f64>> = segment
-            .points
-            .iter()
-            .map(|&i| positions[i as usize])
-            .collect();
-        if super::pot::on_the_wall(&members, &pot, &foreground.up) {
+    for (segment, wall) in segments.iter_mut().zip(on_the_wall) {
+        if wall {
             segment.label = SegmentLabel::Pot;
             relabelled += 1;
         }
@@ -1891,8 +1908,9 @@ mod tests {
             .map(|_| wall(rng.range(0.01, 0.08), rng.range(0.5, 1.5)))
             .collect();
         add(SegmentLabel::Leaf, piece, &mut positions);
-        // A leaf above the pot, and one hanging over the rim and down outside the wall.
-        let above = (0..400)
+        // A crown of leaves above the pot (most of the plant's leaf points), and a leaf hanging
+        // over the rim and down outside the wall.
+        let above = (0..8000)
             .map(|_| {
                 let (r, a) = (rng.range(0.1, 0.25), rng.range(2.0, 2.6));
                 Point3::new(r * a.cos(), r * a.sin(), 0.2 + 0.2 * (r - 0.1))
@@ -1931,6 +1949,35 @@ mod tests {
                 SegmentLabel::Leaf
             ]
         );
+        // The same pot with a rosette of leaves lying 6 cm below its rim outside it (a tenth
+        // of the leaf points): pieces of a plant taken for a pot, so nothing changes.
+        let mut rosette_points = positions.clone();
+        let start = rosette_points.len();
+        rosette_points.extend((0..900).map(|k| {
+            let (r, a) = (0.15 + 0.0001 * k as f64, 0.007 * k as f64);
+            Point3::new(r * a.cos(), r * a.sin(), 0.06)
+        }));
+        let mut with_rosette = segments.clone();
+        with_rosette[1].label = SegmentLabel::Leaf;
+        with_rosette.push(Segment {
+            id: 4,
+            label: SegmentLabel::Leaf,
+            leaf_id: None,
+            points: (start as u32..rosette_points.len() as u32).collect(),
+            num_points: 900,
+            shape: Shape::of(rosette_points[start..].iter().copied()),
+        });
+        let rosette_foreground = upright(
+            PointClass::Plant,
+            rosette_points.len(),
+            None,
+            Point3::new(0.03, -0.025, 0.2),
+        );
+        assert_eq!(
+            label_pot_wall(&mut with_rosette, &rosette_points, &rosette_foreground),
+            0
+        );
+        assert_eq!(with_rosette[1].label, SegmentLabel::Leaf);
         // Without a pot found (too few pot points) nothing changes.
         let mut few = segments.clone();
         few[0]
