@@ -1224,6 +1224,15 @@ struct Anchor {
     point: Point3<f64>,
 }
 
+/// A stem ends at a fork only if the chain beyond it has fewer forks (nodes with two or more
+/// children) than this share of the chain's forks up to it ([`stem_top`]). Where stems ended on
+/// 7 synthetic plants (photos of medium 3 and 4; semi-dense compound 11, broadleaf 2 and 3,
+/// smallleaf 1) 0–4 forks lay beyond the fork for 4–20 up to it (at most 0.2 of them); on a
+/// COLMAP run of the real Arabidopsis the stem "ended" 55 % up its inflorescence where its
+/// stereo halo thins, with 49 forks beyond for 67 up to it (0.73): its upper half, bearing
+/// fruits, was cut off the main stem as a side branch (stop 79).
+const MAX_FORK_SHARE_ABOVE_TOP: f64 = 0.5;
+
 /// Where a main axis stops being the stem: the first fork (a node with two or more children)
 /// past the chain's fourth node after which the tube is clearly thinner, so that a stem under
 /// a crown of petioles (a rosette, the generator's broadleaf plants: a 6 cm stem of radius
@@ -1232,7 +1241,9 @@ struct Anchor {
 /// local axis; at the fork, the median over the next four nodes is less than half of both
 /// the chain's median up to the fork and the median of the last four nodes up to it (a
 /// gradual taper does not end a stem), and none of the next eight reaches the chain's median
-/// (sparse points split a ring into arcs that read thin for a level or two).
+/// (sparse points split a ring into arcs that read thin for a level or two). And what the chain
+/// runs on into bears fewer forks than [`MAX_FORK_SHARE_ABOVE_TOP`] of those up to the fork: a
+/// petiole above a crown bears none, an axis that goes on bearing organs is the stem going on.
 fn stem_top(chain: &[usize], nodes: &[Node], points: &[Point3<f64>]) -> Option<StemTop> {
     const STEM_NODES: usize = 4;
     const AHEAD: usize = 4;
@@ -1251,12 +1262,20 @@ fn stem_top(chain: &[usize], nodes: &[Node], points: &[Point3<f64>]) -> Option<S
         let local = median(&radii[k + 1 - STEM_NODES..=k])?;
         let ahead = median(&radii[k + 1..k + 1 + AHEAD])?;
         let confirm = &radii[k + 1..(k + 1 + CONFIRM).min(chain.len())];
-        (ahead < RATIO * behind.min(local) && confirm.iter().all(|&r| r < behind)).then_some(
-            StemTop {
+        let forks = |range: &[usize]| {
+            range
+                .iter()
+                .filter(|&&v| nodes[v].children.len() >= 2)
+                .count()
+        };
+        (ahead < RATIO * behind.min(local)
+            && confirm.iter().all(|&r| r < behind)
+            && (forks(&chain[k + 1..]) as f64)
+                < MAX_FORK_SHARE_ABOVE_TOP * forks(&chain[..=k]) as f64)
+            .then_some(StemTop {
                 fork: k,
                 radius: behind,
-            },
-        )
+            })
     })
 }
 
@@ -2146,6 +2165,52 @@ mod tests {
         assert_eq!(stats.stems_ended, 0, "{stats:?}");
         let top = tree.branches[0].cylinder.skeleton.point_at_fraction(1.0);
         assert!(top.z > 0.27, "the stem stopped at {top}: {stats:?}");
+    }
+
+    #[test]
+    fn a_stem_that_goes_on_bearing_organs_above_a_thinning_does_not_end_there() {
+        // A main axis of 30 level nodes 1 cm apart, rings of 8 points: radius 6 mm up to node
+        // 9 (a smeared lower stem), 2 mm above. Side branches (a second child, outside the
+        // chain) leave at nodes 3, 6 and 9 (the fork where it thins), and at `above` nodes
+        // beyond it.
+        let chain_of = |above: &[usize]| {
+            let mut points = Vec::new();
+            let mut nodes = Vec::new();
+            for k in 0..30usize {
+                let radius = if k <= 9 { 0.006 } else { 0.002 };
+                let z = 0.01 * k as f64;
+                let first = points.len();
+                points.extend((0..8).map(|j| {
+                    let a = std::f64::consts::TAU * j as f64 / 8.0;
+                    Point3::new(radius * a.cos(), radius * a.sin(), z)
+                }));
+                let mut children = if k < 29 { vec![k + 1] } else { Vec::new() };
+                if k == 3 || k == 6 || k == 9 || above.contains(&k) {
+                    children.push(1000 + k);
+                }
+                nodes.push(Node {
+                    centroid: Point3::new(0.0, 0.0, z),
+                    points: (first..points.len()).collect(),
+                    parent: k.checked_sub(1),
+                    children,
+                    distance: z,
+                });
+            }
+            (nodes, points)
+        };
+        let chain: Vec<usize> = (0..30).collect();
+        // Bare above the thinning (a petiole over a crown): the stem ends at the fork.
+        let (nodes, points) = chain_of(&[]);
+        let top = stem_top(&chain, &nodes, &points).expect("the stem ends");
+        assert_eq!(top.fork, 9);
+        assert!((top.radius - 0.006).abs() < 1e-9, "{}", top.radius);
+        // One side branch beyond it (fewer than half the three up to it): still ends.
+        let (nodes, points) = chain_of(&[20]);
+        assert_eq!(stem_top(&chain, &nodes, &points).map(|t| t.fork), Some(9));
+        // Bearing as many side branches beyond it as up to it, as an inflorescence bears its
+        // fruits: the stem goes on (the old rule ended it at node 9).
+        let (nodes, points) = chain_of(&[14, 20, 25]);
+        assert!(stem_top(&chain, &nodes, &points).is_none());
     }
 
     #[test]
