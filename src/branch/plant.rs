@@ -1129,6 +1129,7 @@ mod tests {
             rim_centre: Point3::new(0.0, 0.0, 0.12),
             soil_centre: base,
             radius: 0.09,
+            wall_radius: 0.09,
         };
         let below = |p: Point3<f64>| below_the_plant(&p, &up, &base, Some(&pot));
         // Soil and floor, and whatever stands between the soil and the rim.

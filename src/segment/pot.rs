@@ -21,6 +21,12 @@ pub struct PotShape {
     pub soil_centre: Point3<f64>,
     /// Median distance of the pot's points from its axis.
     pub radius: f64,
+    /// Median distance from its axis of the pot's points at its wall's heights (between
+    /// [`WALL_BOTTOM`] and [`WALL_TOP`] of the way from its lowest points to its rim, where
+    /// neither the soil nor the floor lies); [`PotShape::radius`] where fewer than
+    /// [`MIN_WALL_POINTS`] are there. Which segments lie on the wall is asked of this radius
+    /// ([`on_the_wall`]): the soil inside the rim pulls the median of all pot points in.
+    pub wall_radius: f64,
 }
 
 /// A pot needs this many points to set the plant's base.
@@ -69,6 +75,17 @@ pub fn pot_from_points(
     radii.sort_by(f64::total_cmp);
     let rim_centre = centre + offset + up * rim;
     let radius = radii[radii.len() / 2];
+    let mut wall_radii: Vec<f64> = pot
+        .iter()
+        .filter(|p| wall_band(up.dot(&(*p - centre)), low, rim).is_some())
+        .map(|p| (across(p) - offset).norm())
+        .collect();
+    wall_radii.sort_by(f64::total_cmp);
+    let wall_radius = if wall_radii.len() >= MIN_WALL_POINTS {
+        wall_radii[wall_radii.len() / 2]
+    } else {
+        radius
+    };
     let inside = inside_depths(
         &rim_centre,
         radius,
@@ -87,6 +104,7 @@ pub fn pot_from_points(
         rim_centre,
         soil_centre: rim_centre - up * soil_depth,
         radius,
+        wall_radius,
     };
     tracing::debug!(?shape, height = rim - low, inside_depth = ?depth, "pot from its points");
     if depth.is_some_and(|depth| depth > MAX_INSIDE_DEPTH)
@@ -117,6 +135,9 @@ const INSIDE_SHARE: f64 = 0.5;
 /// On 17 synthetic plants (broadleaf, medium and compound, from photos and semi-dense) they lie
 /// within 0.01–0.17 radii of it: the soil line.
 const MAX_INSIDE_DEPTH: f64 = 0.5;
+
+/// Fewer pot points at its wall's heights than this say nothing about its wall's radius.
+const MIN_WALL_POINTS: usize = 20;
 
 /// Fewer points inside a pot than this say nothing about its inside.
 const MIN_INSIDE_POINTS: usize = 20;
@@ -260,7 +281,7 @@ fn robust_circle_centre(points: &[(f64, f64, usize)]) -> Option<(f64, f64)> {
 }
 
 /// Whether a segment's points lie on the pot's wall: their mean distance from the pot's axis is
-/// within [`WALL_RADIUS_TOLERANCE`] of the pot's radius, they spread across it by less than
+/// within [`WALL_RADIUS_TOLERANCE`] of the wall's radius ([`PotShape::wall_radius`]), they spread across it by less than
 /// [`WALL_RADIAL_SPREAD`] of that distance (a surface of revolution about the axis, as the
 /// segmentation's own pot test asks about the cameras' axis) or about a taper
 /// ([`spread_about_a_taper`]), and their centroid is below the rim. A leaf may hang over the
@@ -270,7 +291,7 @@ fn robust_circle_centre(points: &[(f64, f64, usize)]) -> Option<(f64, f64)> {
 /// the rim, mean distance 0.98–1.01 pot radii, spread 5–9 %; every true leaf of seeds 1–3 and
 /// 11–13 starts above the rim).
 pub fn on_the_wall(points: &[Point3<f64>], pot: &PotShape, up: &Vector3<f64>) -> bool {
-    if points.is_empty() || pot.radius <= 0.0 {
+    if points.is_empty() || pot.wall_radius <= 0.0 {
         return false;
     }
     let n = points.len() as f64;
@@ -281,7 +302,7 @@ pub fn on_the_wall(points: &[Point3<f64>], pot: &PotShape, up: &Vector3<f64>) ->
     let (mean, spread) = radial_mean_and_spread(points, &pot.rim_centre, up);
     let spread =
         spread_about_a_taper(points, &pot.rim_centre, up).map_or(spread, |s| s.min(spread));
-    (mean - pot.radius).abs() <= WALL_RADIUS_TOLERANCE * pot.radius
+    (mean - pot.wall_radius).abs() <= WALL_RADIUS_TOLERANCE * pot.wall_radius
         && spread < WALL_RADIAL_SPREAD * mean
 }
 
@@ -449,6 +470,7 @@ mod tests {
             rim_centre: Point3::new(0.0, 0.0, 0.12),
             soil_centre: Point3::new(0.0, 0.0, 0.11),
             radius: 0.085,
+            wall_radius: 0.085,
         };
         let ring = |r: f64, z: f64, a0: f64, a1: f64| -> Vec<Point3<f64>> {
             (0..50)
@@ -608,6 +630,7 @@ mod tests {
             rim_centre: Point3::new(0.0, 0.0, 0.12),
             soil_centre: Point3::new(0.0, 0.0, 0.11),
             radius: 0.08,
+            wall_radius: 0.08,
         };
         // 100 leaf points: the crown above the rim, a few resting on it (down to 0.1 radius
         // below it), and `hanging` of them 3 cm below it outside the wall.
@@ -701,6 +724,39 @@ mod tests {
         // Collinear points fix no centre.
         let line: Vec<(f64, f64, usize)> = (0..10).map(|k| (k as f64, 2.0 * k as f64, 0)).collect();
         assert_eq!(banded_circle_centre(&line), None);
+    }
+
+    #[test]
+    fn the_wall_radius_is_measured_on_the_wall_not_pulled_in_by_the_soil() {
+        // A pot on the floor (z = 0), its axis through the origin, its wall tapering from 0.075
+        // at the floor to 0.09 at the rim (z = 0.12), seen all round; its soil a little below
+        // the rim, sampled twice as densely as the wall (as stereo sees a pot from above).
+        let mut rng = crate::util::rng::Rng::seed_from(23);
+        let wall = |z: f64, angle: f64| {
+            let radius = 0.075 + 0.015 * z / 0.12;
+            Point3::new(radius * angle.cos(), radius * angle.sin(), z)
+        };
+        let mut pot: Vec<Point3<f64>> = (0..400)
+            .map(|_| wall(rng.range(0.0, 0.12), rng.range(0.0, 6.3)))
+            .collect();
+        pot.extend(soil_disc(&mut rng, 800));
+        let up = Vector3::z();
+        let shape = pot_from_points(&pot, &pot, &up, &Point3::new(0.0, 0.0, 0.06)).expect("a pot");
+        // The soil (radius 0 to 0.07) pulls the median of all the points well inside the wall;
+        // the wall's own radius is that of its middle heights.
+        assert!(shape.radius < 0.065, "{shape:?}");
+        assert!((shape.wall_radius - 0.081).abs() < 0.004, "{shape:?}");
+        // A strip of the wall near the rim (0.086-0.088 from the axis, 1-3 cm below it) is
+        // wall; measured against the median of all points it was not (1.4 of those radii).
+        let strip: Vec<Point3<f64>> = (0..60)
+            .map(|k| wall(0.085 + 0.015 * (k % 6) as f64 / 5.0, 0.5 + 0.01 * k as f64))
+            .collect();
+        assert!(on_the_wall(&strip, &shape, &up));
+        let pulled_in = PotShape {
+            wall_radius: shape.radius,
+            ..shape
+        };
+        assert!(!on_the_wall(&strip, &pulled_in, &up));
     }
 
     #[test]
