@@ -281,15 +281,15 @@ fn robust_circle_centre(points: &[(f64, f64, usize)]) -> Option<(f64, f64)> {
 }
 
 /// Whether a segment's points lie on the pot's wall: their mean distance from the pot's axis is
-/// within [`WALL_RADIUS_TOLERANCE`] of the wall's radius ([`PotShape::wall_radius`]), they spread across it by less than
-/// [`WALL_RADIAL_SPREAD`] of that distance (a surface of revolution about the axis, as the
-/// segmentation's own pot test asks about the cameras' axis) or about a taper
-/// ([`spread_about_a_taper`]), and their centroid is below the rim. A leaf may hang over the
-/// rim, but its points are spread over distances from the axis and it starts above the rim; a
-/// piece of the wall that the leaf test took as a sheet is low and at one distance (from photos
-/// of broadleaf seeds 1, 2, 11 and 13: one such "leaf" each, 2,254–4,468 points, 6–8 cm below
-/// the rim, mean distance 0.98–1.01 pot radii, spread 5–9 %; every true leaf of seeds 1–3 and
-/// 11–13 starts above the rim).
+/// within [`WALL_RADIUS_TOLERANCE`] of the wall's radius ([`PotShape::wall_radius`]), they
+/// spread across it by less than [`WALL_RADIAL_SPREAD`] of that distance (a surface of
+/// revolution about the axis, as the segmentation's own pot test asks about the cameras' axis)
+/// or about a taper ([`spread_about_a_taper`]), and their centroid is below the rim. A leaf may
+/// hang over the rim, but its points are spread over distances from the axis and it starts
+/// above the rim; a piece of the wall that the leaf test took as a sheet is low and at one
+/// distance (from photos of broadleaf seeds 1, 2, 11 and 13: one such "leaf" each, 2,254–4,468
+/// points, 6–8 cm below the rim, mean distance 0.98–1.01 pot radii, spread 5–9 %; every true
+/// leaf of seeds 1–3 and 11–13 starts above the rim).
 pub fn on_the_wall(points: &[Point3<f64>], pot: &PotShape, up: &Vector3<f64>) -> bool {
     if points.is_empty() || pot.wall_radius <= 0.0 {
         return false;
