@@ -1269,9 +1269,9 @@ fn ring_centres(
         return centres;
     }
     let first = trusted(0);
-    for k in 1..chain.len() {
+    for (k, slot) in centres.iter_mut().enumerate().skip(1) {
         match trusted(k) {
-            Some(centre) => centres[k] = centre,
+            Some(centre) => *slot = centre,
             None => break,
         }
     }
