@@ -708,6 +708,24 @@ mod tests {
             .collect()
     }
 
+    /// A point of a pot's wall tapering from radius 0.075 at the floor (z = 0) to 0.09 at the
+    /// rim (z = 0.12), its axis through the origin; above the rim the radius stays 0.09.
+    fn tapered_wall(z: f64, angle: f64) -> Point3<f64> {
+        let radius = 0.075 + 0.015 * z.min(0.12) / 0.12;
+        Point3::new(radius * angle.cos(), radius * angle.sin(), z)
+    }
+
+    /// That pot seen all round (400 wall points) with its soil a little below the rim,
+    /// sampled twice as densely as the wall (as stereo sees a pot from above).
+    fn tapered_pot(seed: u64) -> Vec<Point3<f64>> {
+        let mut rng = crate::util::rng::Rng::seed_from(seed);
+        let mut pot: Vec<Point3<f64>> = (0..400)
+            .map(|_| tapered_wall(rng.range(0.0, 0.12), rng.range(0.0, 6.3)))
+            .collect();
+        pot.extend(soil_disc(&mut rng, 800));
+        pot
+    }
+
     /// Deterministic jitter within 2 mm.
     fn rng_free_jitter(k: usize) -> f64 {
         0.002 * ((k as f64 * 12.9898).sin() * 43_758.545).fract()
@@ -748,15 +766,8 @@ mod tests {
         // A pot on the floor (z = 0), its axis through the origin, its wall tapering from 0.075
         // at the floor to 0.09 at the rim (z = 0.12), seen all round; its soil a little below
         // the rim, sampled twice as densely as the wall (as stereo sees a pot from above).
-        let mut rng = crate::util::rng::Rng::seed_from(23);
-        let wall = |z: f64, angle: f64| {
-            let radius = 0.075 + 0.015 * z / 0.12;
-            Point3::new(radius * angle.cos(), radius * angle.sin(), z)
-        };
-        let mut pot: Vec<Point3<f64>> = (0..400)
-            .map(|_| wall(rng.range(0.0, 0.12), rng.range(0.0, 6.3)))
-            .collect();
-        pot.extend(soil_disc(&mut rng, 800));
+        let pot = tapered_pot(23);
+        let wall = tapered_wall;
         let up = Vector3::z();
         let shape = pot_from_points(&pot, &pot, &up, &Point3::new(0.0, 0.0, 0.06)).expect("a pot");
         // The soil (radius 0 to 0.07) pulls the median of all the points well inside the wall;
@@ -779,15 +790,8 @@ mod tests {
     #[test]
     fn a_strip_on_the_rims_lip_is_pot_and_one_rising_above_it_is_not() {
         // The pot of the wall-radius test; strips of an arc at the rim's radius.
-        let mut rng = crate::util::rng::Rng::seed_from(29);
-        let wall = |z: f64, angle: f64| {
-            let radius = 0.075 + 0.015 * z.min(0.12) / 0.12;
-            Point3::new(radius * angle.cos(), radius * angle.sin(), z)
-        };
-        let mut pot: Vec<Point3<f64>> = (0..400)
-            .map(|_| wall(rng.range(0.0, 0.12), rng.range(0.0, 6.3)))
-            .collect();
-        pot.extend(soil_disc(&mut rng, 800));
+        let pot = tapered_pot(29);
+        let wall = tapered_wall;
         let up = Vector3::z();
         let shape = pot_from_points(&pot, &pot, &up, &Point3::new(0.0, 0.0, 0.06)).expect("a pot");
         let rim = shape.rim_centre.z;
@@ -817,12 +821,8 @@ mod tests {
         // A pot on the floor (z = 0), its axis through the origin, its wall tapering from 0.075
         // at the floor to 0.09 at the rim (z = 0.12), of which stereo found an arc of 80°.
         let mut rng = crate::util::rng::Rng::seed_from(11);
-        let wall = |z: f64, angle: f64| {
-            let radius = 0.075 + 0.015 * z / 0.12;
-            Point3::new(radius * angle.cos(), radius * angle.sin(), z)
-        };
         let arc: Vec<Point3<f64>> = (0..300)
-            .map(|_| wall(rng.range(0.0, 0.12), rng.range(2.0, 3.4)))
+            .map(|_| tapered_wall(rng.range(0.0, 0.12), rng.range(2.0, 3.4)))
             .collect();
         // Soil inside the rim, a little below it.
         let soil = soil_disc(&mut rng, 200);
