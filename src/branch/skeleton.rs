@@ -1286,10 +1286,11 @@ fn ring_centres(
     centres
 }
 
-/// The circle fitted across the unit `up` to a level's points (Kåsa's algebraic fit in the
-/// plane through its centroid square to `up`): its centre, at the centroid's height, and
-/// radius. `None` for fewer than [`MIN_RING_POINTS`] points or a degenerate fit (points on a
-/// line).
+/// The circle fitted across the unit `up` to a level's points (Kåsa's algebraic fit,
+/// [`crate::util::geometry::concentric_circle_centre`], in the plane through its centroid
+/// square to `up`): its centre, at the centroid's height, and radius (for Kåsa's fit the root
+/// mean square distance of the points from the centre). `None` for fewer than
+/// [`MIN_RING_POINTS`] points or a degenerate fit (points on a line).
 fn circle_across(
     node: &Node,
     points: &[Point3<f64>],
@@ -1300,22 +1301,22 @@ fn circle_across(
     }
     let e1 = crate::util::geometry::any_perpendicular(up);
     let e2 = up.cross(&e1);
-    let mut normal = nalgebra::Matrix3::<f64>::zeros();
-    let mut right = Vector3::<f64>::zeros();
-    for &i in &node.points {
-        let d = points[i] - node.centroid;
-        let (x, y) = (d.dot(&e1), d.dot(&e2));
-        let row = Vector3::new(x, y, 1.0);
-        normal += row * row.transpose();
-        right -= row * (x * x + y * y);
-    }
-    let solution = normal.lu().solve(&right)?;
-    let (a, b) = (-0.5 * solution.x, -0.5 * solution.y);
-    let squared = a * a + b * b - solution.z;
-    if !(squared.is_finite() && squared > 0.0) {
-        return None;
-    }
-    Some((node.centroid + e1 * a + e2 * b, squared.sqrt()))
+    let planar: Vec<(f64, f64, usize)> = node
+        .points
+        .iter()
+        .map(|&i| {
+            let d = points[i] - node.centroid;
+            (d.dot(&e1), d.dot(&e2), 0)
+        })
+        .collect();
+    let (a, b) = crate::util::geometry::concentric_circle_centre(&planar, 1)?;
+    let squared = planar
+        .iter()
+        .map(|&(x, y, _)| (x - a).powi(2) + (y - b).powi(2))
+        .sum::<f64>()
+        / planar.len() as f64;
+    (squared.is_finite() && squared > 0.0)
+        .then(|| (node.centroid + e1 * a + e2 * b, squared.sqrt()))
 }
 
 /// Moving average over three nodes (ends kept).
