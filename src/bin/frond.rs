@@ -815,6 +815,15 @@ struct DensifyArgs {
     /// their points are not marked as thin organs (0: off; 4 was measured).
     #[arg(long, default_value_t = 0)]
     thin_short_bars: usize,
+    /// Free-space check: a stereo point is dropped when at least this many depth maps see
+    /// past it onto a surface the fusion confirmed, as views from other sides see past the
+    /// halo stereo smears beside thin stems against a plain backdrop (0: off).
+    #[arg(long, default_value_t = 2)]
+    free_space_maps: usize,
+    /// Free-space check: and when those are more than this share of the maps with a depth
+    /// on the point or past it.
+    #[arg(long, default_value_t = 0.5)]
+    free_space_share: f64,
 }
 
 impl DensifyArgs {
@@ -852,6 +861,8 @@ impl DensifyArgs {
         options.stereo.uniqueness_ratio = self.uniqueness;
         options.fusion.min_consistent = self.min_consistent;
         options.fusion.max_relative_depth_error = self.max_depth_error;
+        options.free_space.min_maps = self.free_space_maps;
+        options.free_space.share = self.free_space_share;
         options.fusion.pixel_step = self.pixel_step;
         if self.voxel_pixels.is_nan() || self.voxel_pixels < 0.5 {
             bail!("--voxel-pixels must be at least 0.5");

@@ -10,6 +10,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::stereo::RectifiedDepthMap;
+use crate::graph::neighbours::Neighbours;
 use crate::util::geometry::closest_point_to_lines;
 use crate::util::progress::Progress;
 use crate::util::stats::median;
@@ -333,6 +334,117 @@ pub fn fuse(
     (fused, stats)
 }
 
+/// The free-space check ([`seen_through`]): a fused point is dropped when depth maps see
+/// past it, in front of what they see, at least `min_maps` times and in more than `share` of
+/// the maps that see the point or past it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct FreeSpaceOptions {
+    /// Maps that must see past a point before it can be dropped (0: no check).
+    pub min_maps: usize,
+    /// Share of the maps with a depth there (on the point or past it) that must see past it.
+    pub share: f64,
+}
+
+impl Default for FreeSpaceOptions {
+    fn default() -> Self {
+        Self {
+            min_maps: 2,
+            share: 0.5,
+        }
+    }
+}
+
+/// How the depth maps see one point: how many put their nearest surface on it (within the
+/// fusion's depth tolerance) and how many see past it (their nearest surface there lies
+/// farther, so the point stands in space they look through).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Sightings {
+    pub on: u32,
+    pub past: u32,
+}
+
+/// For each point, how the depth maps see it ([`Sightings`]). A map's surface at the point's
+/// pixel is the nearest valid depth of the 3×3 pixels around it, so a thin organ a pixel off
+/// in one map still stands in front; a pixel without any depth says nothing. Stereo fattens a
+/// thin organ's disparity into the textureless background beside it, and nearby views fatten
+/// alike, so the halo passes the multi-view agreement of [`fuse`]; views from other sides
+/// look through the halo to the organ or what lies behind it.
+pub fn seen_through(
+    points_world: &[Point3<f64>],
+    maps: &[RectifiedDepthMap],
+    max_relative_depth_error: f64,
+    confirmed: Option<&Confirmed>,
+) -> Vec<Sightings> {
+    points_world
+        .par_iter()
+        .map(|point| {
+            let mut seen = Sightings::default();
+            let mut behind = Vec::new();
+            for map in maps {
+                let Some((uv, depth)) = map.camera.project(point) else {
+                    continue;
+                };
+                let Some((i, j)) = map.camera.pixel_of(&uv) else {
+                    continue;
+                };
+                let mut nearest = (f64::INFINITY, i, j);
+                for jj in j.saturating_sub(1)..=(j + 1).min(map.camera.height - 1) {
+                    for ii in i.saturating_sub(1)..=(i + 1).min(map.camera.width - 1) {
+                        let z = map.depth_at(ii, jj) as f64;
+                        if z > 0.0 && z < nearest.0 {
+                            nearest = (z, ii, jj);
+                        }
+                    }
+                }
+                let (surface, ii, jj) = nearest;
+                if !surface.is_finite() {
+                    continue;
+                }
+                let tolerance = max_relative_depth_error * depth;
+                if surface > depth + tolerance {
+                    seen.past += 1;
+                    if confirmed.is_some() {
+                        behind.push(map.camera.unproject_pixel(ii, jj, surface));
+                    }
+                } else if surface >= depth - tolerance {
+                    seen.on += 1;
+                }
+            }
+            // Confirming is a search per map: done only where the point would otherwise go
+            // (confirming only lowers `past`, so elsewhere the decision is the same).
+            if let Some(c) = confirmed
+                && in_free_space(&seen, &c.options)
+            {
+                seen.past = behind.iter().filter(|p| c.holds(p)).count() as u32;
+            }
+            seen
+        })
+        .collect()
+}
+
+/// Surfaces the fusion confirmed: its points, and how near one a depth must lie to be on it;
+/// only points the unconfirmed sightings would drop under `options` are confirmed.
+pub struct Confirmed {
+    pub points: Neighbours,
+    pub radius: f64,
+    pub options: FreeSpaceOptions,
+}
+
+impl Confirmed {
+    fn holds(&self, point_world: &Point3<f64>) -> bool {
+        self.points
+            .nearest(point_world)
+            .is_some_and(|n| n.distance() <= self.radius)
+    }
+}
+
+/// Whether [`FreeSpaceOptions`] drops a point seen so.
+pub fn in_free_space(seen: &Sightings, options: &FreeSpaceOptions) -> bool {
+    options.min_maps > 0
+        && seen.past as usize >= options.min_maps
+        && seen.past as f64 > options.share * (seen.on + seen.past) as f64
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -343,8 +455,14 @@ mod tests {
 
     const RADIUS: f64 = 0.5;
 
-    /// Exact depth maps of a ball of radius 0.5 at the origin, one per ring neighbour pair.
-    fn sphere_maps(num_views: usize) -> Vec<RectifiedDepthMap> {
+    /// Exact depth maps, one per ring neighbour pair rectified at `scale` of the 640 × 480
+    /// photos, of the surface `hit` gives: the distance along a ray (origin, direction) to
+    /// its first crossing, in units of the direction's length.
+    fn exact_maps(
+        num_views: usize,
+        scale: f64,
+        hit: impl Fn(&Vector3<f64>, &Vector3<f64>) -> Option<f64>,
+    ) -> Vec<RectifiedDepthMap> {
         let model = ring_model(num_views, 20);
         let images = model.images();
         let camera = model.camera_of(&images[0]);
@@ -354,7 +472,7 @@ mod tests {
                 let rectified = RectifiedPair::new(
                     (&images[left], camera),
                     (&images[right], camera),
-                    0.25,
+                    scale,
                     4000,
                 )
                 .unwrap();
@@ -362,15 +480,10 @@ mod tests {
                 let mut depth = vec![0.0f32; rect.width * rect.height];
                 for j in 0..rect.height {
                     for i in 0..rect.width {
-                        // Ray–sphere intersection along the pixel's ray (rect z = 1 scaling).
+                        // Along the pixel's ray scaled to rectified depth 1.
                         let direction = rect.unproject_pixel(i, j, 1.0) - rect.center_world;
-                        let origin = rect.center_world.coords;
-                        let a = direction.norm_squared();
-                        let b = 2.0 * origin.dot(&direction);
-                        let c = origin.norm_squared() - RADIUS * RADIUS;
-                        let disc = b * b - 4.0 * a * c;
-                        if disc > 0.0 {
-                            depth[j * rect.width + i] = ((-b - disc.sqrt()) / (2.0 * a)) as f32;
+                        if let Some(t) = hit(&rect.center_world.coords, &direction) {
+                            depth[j * rect.width + i] = t as f32;
                         }
                     }
                 }
@@ -389,6 +502,27 @@ mod tests {
             })
             .collect()
     }
+
+    /// The nearer root of a t² + b t + c = 0, when there is one.
+    fn nearer_root(a: f64, b: f64, c: f64) -> Option<f64> {
+        let disc = b * b - 4.0 * a * c;
+        (disc > 0.0 && a > 0.0).then(|| (-b - disc.sqrt()) / (2.0 * a))
+    }
+
+    /// Exact depth maps of a ball of radius 0.5 at the origin, one per ring neighbour pair.
+    fn sphere_maps(num_views: usize) -> Vec<RectifiedDepthMap> {
+        exact_maps(num_views, 0.25, |origin, direction| {
+            nearer_root(
+                direction.norm_squared(),
+                2.0 * origin.dot(direction),
+                origin.norm_squared() - RADIUS * RADIUS,
+            )
+        })
+    }
+
+    /// Radius of the thin stem of [`stem_and_backdrop_maps`] (at full photo size its
+    /// diameter is about 5 pixels).
+    const STEM_RADIUS: f64 = 0.02;
 
     fn worst_surface_error(fused: &FusedPoints) -> f64 {
         fused
@@ -452,6 +586,138 @@ mod tests {
         };
         let (cropped, _) = fuse(&maps, &FusionOptions::default(), Some(&small), &NoProgress);
         assert!(cropped.is_empty());
+    }
+
+    /// A thin upright stem (radius [`STEM_RADIUS`], from z = −0.5 to 0.5) on the ring's axis,
+    /// at full photo size, before a backdrop: a cylinder of radius 6 around the
+    /// ring of cameras (at radius 4), seen from inside.
+    fn stem_and_backdrop_maps(num_views: usize) -> Vec<RectifiedDepthMap> {
+        exact_maps(num_views, 1.0, |origin, direction| {
+            let a = direction.x * direction.x + direction.y * direction.y;
+            let b = 2.0 * (origin.x * direction.x + origin.y * direction.y);
+            let stem_c = origin.x * origin.x + origin.y * origin.y - STEM_RADIUS * STEM_RADIUS;
+            let stem =
+                nearer_root(a, b, stem_c).filter(|t| (origin.z + t * direction.z).abs() <= 0.5);
+            let c = origin.x * origin.x + origin.y * origin.y - 36.0;
+            // From inside, the crossing ahead is the farther root.
+            let backdrop = (a > 0.0).then(|| (-b + (b * b - 4.0 * a * c).sqrt()) / (2.0 * a));
+            stem.or(backdrop)
+        })
+    }
+
+    /// Points on the stem's surface and on the backdrop (what fusion confirms; the backdrop's
+    /// about 0.1 apart), and a sheet
+    /// of halo: points at the stem's depth seen from view 0 (at +x), 3 to 15 stem radii to
+    /// either side of it, as stereo smears the stem's disparity into a plain background.
+    fn stem_backdrop_and_halo() -> (Vec<Point3<f64>>, Vec<Point3<f64>>, Vec<Point3<f64>>) {
+        let mut stem = Vec::new();
+        let mut backdrop = Vec::new();
+        let mut halo = Vec::new();
+        for k in 0..40 {
+            let z = -0.45 + 0.9 * k as f64 / 39.0;
+            for a in 0..24 {
+                let angle = std::f64::consts::TAU * a as f64 / 24.0;
+                stem.push(Point3::new(
+                    STEM_RADIUS * angle.cos(),
+                    STEM_RADIUS * angle.sin(),
+                    z,
+                ));
+            }
+            for a in 0..360 {
+                let angle = std::f64::consts::TAU * a as f64 / 360.0;
+                backdrop.push(Point3::new(6.0 * angle.cos(), 6.0 * angle.sin(), 5.0 * z));
+            }
+            for side in [-1.0, 1.0] {
+                for step in 3..=15 {
+                    halo.push(Point3::new(
+                        STEM_RADIUS,
+                        side * STEM_RADIUS * step as f64,
+                        z,
+                    ));
+                }
+            }
+        }
+        (stem, backdrop, halo)
+    }
+
+    #[test]
+    fn a_halo_beside_a_thin_stem_is_seen_through_from_other_sides() {
+        let maps = stem_and_backdrop_maps(24);
+        let (stem, backdrop, halo) = stem_backdrop_and_halo();
+        let all: Vec<Point3<f64>> = [&stem[..], &backdrop[..], &halo[..]].concat();
+        // Two of the backdrop's point spacings, as densify's two voxels.
+        let confirmed = Confirmed {
+            points: Neighbours::new(all.iter().copied()).unwrap(),
+            radius: 0.2,
+            options: FreeSpaceOptions::default(),
+        };
+        let seen = seen_through(&all, &maps, 0.01, Some(&confirmed));
+        let options = FreeSpaceOptions::default();
+        let dropped = |range: std::ops::Range<usize>| {
+            seen[range]
+                .iter()
+                .filter(|s| in_free_space(s, &options))
+                .count()
+        };
+        let (n_stem, n_backdrop) = (stem.len(), backdrop.len());
+        let stem_dropped = dropped(0..n_stem);
+        let backdrop_dropped = dropped(n_stem..n_stem + n_backdrop);
+        let halo_dropped = dropped(n_stem + n_backdrop..all.len());
+        assert_eq!(stem_dropped, 0, "stem points dropped");
+        assert_eq!(backdrop_dropped, 0, "backdrop points dropped");
+        assert!(
+            halo_dropped * 10 >= halo.len() * 9,
+            "{halo_dropped} of {} halo points dropped",
+            halo.len()
+        );
+        // No check, nothing dropped; deterministic.
+        let off = FreeSpaceOptions {
+            min_maps: 0,
+            ..options
+        };
+        assert!(seen.iter().all(|s| !in_free_space(s, &off)));
+        assert_eq!(seen_through(&all, &maps, 0.01, Some(&confirmed)), seen);
+    }
+
+    #[test]
+    fn seeing_past_a_point_counts_only_onto_a_confirmed_surface() {
+        // The backdrop unconfirmed (no fused points on it), as where stereo smoothed a
+        // textureless leaf into the depths behind it: what the maps see there is no evidence.
+        let maps = stem_and_backdrop_maps(24);
+        let (stem, _, halo) = stem_backdrop_and_halo();
+        let all: Vec<Point3<f64>> = [&stem[..], &halo[..]].concat();
+        let confirmed = Confirmed {
+            points: Neighbours::new(all.iter().copied()).unwrap(),
+            radius: 0.02,
+            options: FreeSpaceOptions::default(),
+        };
+        let seen = seen_through(&halo, &maps, 0.01, Some(&confirmed));
+        let unconfirmed = seen_through(&halo, &maps, 0.01, None);
+        let past = |s: &[Sightings]| s.iter().map(|s| s.past).sum::<u32>();
+        assert!(
+            past(&seen) * 2 < past(&unconfirmed),
+            "{} vs {}",
+            past(&seen),
+            past(&unconfirmed)
+        );
+        // Points right beside the stem are still seen past onto it from the far side.
+        assert!(seen.iter().any(|s| s.past > 0));
+    }
+
+    #[test]
+    fn a_point_hidden_inside_or_seen_by_no_map_is_kept() {
+        let maps = sphere_maps(24);
+        let options = FreeSpaceOptions::default();
+        // Inside the ball every map's surface lies in front: no map sees past it.
+        let inside = seen_through(&[Point3::new(0.1, -0.2, 0.05)], &maps, 0.01, None);
+        assert_eq!(inside[0].past, 0);
+        assert!(!in_free_space(&inside[0], &options));
+        // Far above the ring no map has a depth there: nothing is known, nothing dropped.
+        let above = seen_through(&[Point3::new(0.0, 0.0, 3.0)], &maps, 0.01, None);
+        assert_eq!(above[0], Sightings::default());
+        // Floating in front of the ball, the maps behind which it stands see past it.
+        let floating = seen_through(&[Point3::new(0.8, 0.0, 0.0)], &maps, 0.01, None);
+        assert!(in_free_space(&floating[0], &options), "{:?}", floating[0]);
     }
 
     #[test]

@@ -28,7 +28,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::Serialize;
 
-pub use fusion::{FusedPoints, FusionOptions, FusionStats, RegionOfInterest};
+pub use fusion::{FreeSpaceOptions, FusedPoints, FusionOptions, FusionStats, RegionOfInterest};
 pub use pairs::{PairOptions, StereoPair};
 pub use stereo::{RectifiedDepthMap, StereoOptions};
 pub use thin::{ThinOptions, ThinStats};
@@ -54,6 +54,8 @@ pub struct DensifyOptions {
     pub fusion: FusionOptions,
     /// The thin-organ sweep ([`thin`]), whose points are added to the fused ones.
     pub thin: ThinOptions,
+    /// Fused points that depth maps see past are dropped ([`fusion::seen_through`]).
+    pub free_space: FreeSpaceOptions,
 }
 
 impl Default for DensifyOptions {
@@ -65,6 +67,7 @@ impl Default for DensifyOptions {
             stereo: StereoOptions::default(),
             fusion: FusionOptions::default(),
             thin: ThinOptions::default(),
+            free_space: FreeSpaceOptions::default(),
         }
     }
 }
@@ -126,6 +129,10 @@ pub struct DensifyReport {
     pub fill_maps: usize,
     /// Points added where the main maps left gaps ([`FusedPoints::gap_fill`]).
     pub gap_fill_points: usize,
+    /// Stereo points dropped as lying in space the depth maps see through
+    /// ([`FreeSpaceOptions`]).
+    #[serde(default)]
+    pub free_space_dropped: usize,
     pub mean_views_per_point: f64,
     pub timings: BTreeMap<String, f64>,
 }
@@ -226,10 +233,10 @@ pub fn densify(
             .timings
             .insert("thin".to_owned(), started.elapsed().as_secs_f64());
     }
+    let mut all = maps;
     if !fill_maps.is_empty() {
         let started = Instant::now();
         report.fill_maps = fill_maps.len();
-        let mut all = maps;
         all.extend(fill_maps);
         let (all_fused, _) = fusion::fuse(
             &all,
@@ -252,12 +259,63 @@ pub fn densify(
             .timings
             .insert("fill".to_owned(), started.elapsed().as_secs_f64());
     }
+    if options.free_space.min_maps > 0 {
+        let started = Instant::now();
+        progress.stage("free space", 0);
+        // A map sees past a point only to a surface the fusion confirmed (a fused point
+        // within two voxels): where stereo smoothed a textureless leaf into what lies behind
+        // it, that depth is no surface.
+        let confirmed =
+            crate::graph::neighbours::Neighbours::new(fused.positions_world.iter().copied())
+                .ok()
+                .map(|points| fusion::Confirmed {
+                    points,
+                    radius: 2.0 * voxel,
+                    options: options.free_space,
+                });
+        let seen = fusion::seen_through(
+            &fused.positions_world,
+            &all,
+            options.fusion.max_relative_depth_error,
+            confirmed.as_ref(),
+        );
+        // The thin-organ sweep's points are exempt: stereo that lost an organ a few pixels
+        // wide sees the background through it, which is why the sweep found it.
+        let keep: Vec<bool> = seen
+            .iter()
+            .zip(&fused.thin_organ)
+            .map(|(s, &thin)| thin || !fusion::in_free_space(s, &options.free_space))
+            .collect();
+        report.free_space_dropped = keep.iter().filter(|&&k| !k).count();
+        fused = keep_points(fused, &keep);
+        report
+            .timings
+            .insert("free_space".to_owned(), started.elapsed().as_secs_f64());
+    }
     report.mean_views_per_point = if fused.is_empty() {
         0.0
     } else {
         fused.views.iter().map(Vec::len).sum::<usize>() as f64 / fused.len() as f64
     };
     Ok((fused, report))
+}
+
+/// The points `keep` says (gap-fill marks included), in order.
+fn keep_points(points: FusedPoints, keep: &[bool]) -> FusedPoints {
+    let gap_fill: Vec<bool> = if points.gap_fill.len() == keep.len() {
+        points
+            .gap_fill
+            .iter()
+            .zip(keep)
+            .filter(|&(_, &k)| k)
+            .map(|(&f, _)| f)
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let mut kept = thin::select(points, keep);
+    kept.gap_fill = gap_fill;
+    kept
 }
 
 /// The main partners' maps and the fill partners' (each in order); when every main pair
