@@ -609,7 +609,7 @@ mod tests {
     /// about 0.1 apart), and a sheet
     /// of halo: points at the stem's depth seen from view 0 (at +x), 3 to 15 stem radii to
     /// either side of it, as stereo smears the stem's disparity into a plain background.
-    fn stem_backdrop_and_halo() -> (Vec<Point3<f64>>, Vec<Point3<f64>>, Vec<Point3<f64>>) {
+    fn stem_backdrop_and_halo() -> [Vec<Point3<f64>>; 3] {
         let mut stem = Vec::new();
         let mut backdrop = Vec::new();
         let mut halo = Vec::new();
@@ -637,13 +637,13 @@ mod tests {
                 }
             }
         }
-        (stem, backdrop, halo)
+        [stem, backdrop, halo]
     }
 
     #[test]
     fn a_halo_beside_a_thin_stem_is_seen_through_from_other_sides() {
         let maps = stem_and_backdrop_maps(24);
-        let (stem, backdrop, halo) = stem_backdrop_and_halo();
+        let [stem, backdrop, halo] = stem_backdrop_and_halo();
         let all: Vec<Point3<f64>> = [&stem[..], &backdrop[..], &halo[..]].concat();
         // Two of the backdrop's point spacings, as densify's two voxels.
         let confirmed = Confirmed {
@@ -684,7 +684,7 @@ mod tests {
         // The backdrop unconfirmed (no fused points on it), as where stereo smoothed a
         // textureless leaf into the depths behind it: what the maps see there is no evidence.
         let maps = stem_and_backdrop_maps(24);
-        let (stem, _, halo) = stem_backdrop_and_halo();
+        let [stem, _, halo] = stem_backdrop_and_halo();
         let all: Vec<Point3<f64>> = [&stem[..], &halo[..]].concat();
         let confirmed = Confirmed {
             points: Neighbours::new(all.iter().copied()).unwrap(),
