@@ -862,6 +862,9 @@ impl DensifyArgs {
         options.fusion.min_consistent = self.min_consistent;
         options.fusion.max_relative_depth_error = self.max_depth_error;
         options.free_space.min_maps = self.free_space_maps;
+        if !(0.0..=1.0).contains(&self.free_space_share) {
+            bail!("--free-space-share must be between 0 and 1");
+        }
         options.free_space.share = self.free_space_share;
         options.fusion.pixel_step = self.pixel_step;
         if self.voxel_pixels.is_nan() || self.voxel_pixels < 0.5 {

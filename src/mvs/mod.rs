@@ -287,7 +287,7 @@ pub fn densify(
             .map(|(s, &thin)| thin || !fusion::in_free_space(s, &options.free_space))
             .collect();
         report.free_space_dropped = keep.iter().filter(|&&k| !k).count();
-        fused = keep_points(fused, &keep);
+        fused = thin::select(fused, &keep);
         report
             .timings
             .insert("free_space".to_owned(), started.elapsed().as_secs_f64());
@@ -298,24 +298,6 @@ pub fn densify(
         fused.views.iter().map(Vec::len).sum::<usize>() as f64 / fused.len() as f64
     };
     Ok((fused, report))
-}
-
-/// The points `keep` says (gap-fill marks included), in order.
-fn keep_points(points: FusedPoints, keep: &[bool]) -> FusedPoints {
-    let gap_fill: Vec<bool> = if points.gap_fill.len() == keep.len() {
-        points
-            .gap_fill
-            .iter()
-            .zip(keep)
-            .filter(|&(_, &k)| k)
-            .map(|(&f, _)| f)
-            .collect()
-    } else {
-        Vec::new()
-    };
-    let mut kept = thin::select(points, keep);
-    kept.gap_fill = gap_fill;
-    kept
 }
 
 /// The main partners' maps and the fill partners' (each in order); when every main pair

@@ -832,9 +832,10 @@ pub fn where_stereo_is_sparse(
     (kept, stats)
 }
 
-/// The points whose `keep` is true, in order.
+/// The points whose `keep` is true, in order (gap-fill marks kept where the points carry them).
 pub(super) fn select(points: FusedPoints, keep: &[bool]) -> FusedPoints {
     let mut out = FusedPoints::default();
+    let marks_fills = points.gap_fill.len() == points.len();
     for (k, &keep) in keep.iter().enumerate() {
         if keep {
             out.positions_world.push(points.positions_world[k]);
@@ -842,6 +843,9 @@ pub(super) fn select(points: FusedPoints, keep: &[bool]) -> FusedPoints {
             out.views.push(points.views[k].clone());
             out.support.push(points.support[k]);
             out.thin_organ.push(points.thin_organ[k]);
+            if marks_fills {
+                out.gap_fill.push(points.gap_fill[k]);
+            }
         }
     }
     out
