@@ -11,7 +11,7 @@ use frond::mesh::TriMesh;
 use frond::model::gltf::{ExportNode, write_glb};
 use frond::model::{segmentation_ply, write_segmentation_ply};
 use frond::scene::{ModelFormat, read_model};
-use frond::synth::{Preset, SynthOptions};
+use frond::synth::{Backdrop, Preset, SynthOptions};
 use tempfile::TempDir;
 
 /// One small broadleaf dataset shared by the tests of this file.
@@ -181,4 +181,83 @@ fn splitting_a_leaf_in_three_loses_it_and_counts_one_over_segmentation() {
     assert_eq!(report.leaves.over_segmented, 1);
     assert_eq!(report.leaves.predicted_segments, eligible + 2);
     assert!(report.ari_plant < 1.0);
+}
+
+/// The studio backdrop renders what a phenotyping cabin's photos show around the plant: dark,
+/// nearly textureless cloth where the patterned backdrop gives stereo texture; the plant, its
+/// ground truth and the cameras are the same.
+#[test]
+fn the_studio_backdrop_is_dark_plain_cloth_around_the_same_plant() {
+    let dir = tempfile::tempdir().unwrap();
+    let render = |backdrop: Backdrop| {
+        let root = dir.path().join(backdrop.name());
+        let options = SynthOptions {
+            preset: Preset::Broadleaf,
+            seed: 7,
+            views: 4,
+            width: 200,
+            height: 150,
+            with_points: false,
+            backdrop,
+            ..SynthOptions::default()
+        };
+        frond::synth::write_dataset(&options, &root, &frond::util::progress::NoProgress).unwrap();
+        root
+    };
+    let (patterned, studio) = (render(Backdrop::Patterned), render(Backdrop::Studio));
+    let meta: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(studio.join("meta.json")).unwrap()).unwrap();
+    assert_eq!(meta["options"]["backdrop"], "studio");
+    // Pixels outside every leaf in the top fifth of each photo: wall or floor, never the pot.
+    let background = |root: &Path, view: &str| {
+        let photo = image::open(root.join("images").join(view))
+            .unwrap()
+            .to_luma8();
+        let mask = image::open(root.join("gt/masks").join(view))
+            .unwrap()
+            .to_luma16();
+        let (w, h) = photo.dimensions();
+        let (mut sum, mut detail, mut n) = (0.0, 0.0, 0usize);
+        for y in 0..h / 5 {
+            for x in 1..w {
+                if mask.get_pixel(x, y)[0] == 0 && mask.get_pixel(x - 1, y)[0] == 0 {
+                    let (a, b) = (
+                        photo.get_pixel(x, y)[0] as f64,
+                        photo.get_pixel(x - 1, y)[0] as f64,
+                    );
+                    sum += a;
+                    detail += (a - b).abs();
+                    n += 1;
+                }
+            }
+        }
+        assert!(n > 1000, "{n} background pixels in {view}");
+        (sum / n as f64, detail / n as f64)
+    };
+    for k in 0..4 {
+        let view = format!("view_{k:04}.png");
+        let (studio_mean, studio_detail) = background(&studio, &view);
+        let (patterned_mean, patterned_detail) = background(&patterned, &view);
+        assert!(
+            studio_mean < 50.0 && studio_mean < 0.5 * patterned_mean,
+            "{view}: {studio_mean} vs {patterned_mean}"
+        );
+        assert!(
+            studio_detail < 0.2 * patterned_detail,
+            "{view}: {studio_detail} vs {patterned_detail}"
+        );
+    }
+    // The same plant and cameras: identical ground truth and poses.
+    for file in [
+        "gt/leaves.json",
+        "gt/branches.json",
+        "sparse/0/images.bin",
+        "sparse/0/cameras.bin",
+    ] {
+        assert_eq!(
+            std::fs::read(patterned.join(file)).unwrap(),
+            std::fs::read(studio.join(file)).unwrap(),
+            "{file}"
+        );
+    }
 }

@@ -11,7 +11,7 @@ use frond::eval::{EvalOptions, GroundTruth, Prediction, align_to_ground_truth, e
 use frond::pipeline::ReconstructOptions;
 use frond::scene::{ModelFormat, Scene, SceneSource, stats, write_model};
 use frond::segment::SegmentOptions;
-use frond::synth::{Preset, SynthOptions, write_dataset};
+use frond::synth::{Backdrop, Preset, SynthOptions, write_dataset};
 use frond::util::progress::Progress;
 
 #[derive(Parser)]
@@ -77,6 +77,10 @@ enum Command {
         /// scale reference for `frond traits --scale-checkerboard`.
         #[arg(long)]
         checkerboard: Option<f64>,
+        /// patterned (terrazzo floor, patterned wall: texture behind every organ) or studio
+        /// (a phenotyping cabin's plain dark cloth on floor and wall, as in real scanners).
+        #[arg(long, default_value = "patterned")]
+        backdrop: Backdrop,
         #[arg(long)]
         out: PathBuf,
     },
@@ -1186,33 +1190,9 @@ fn convert(input: &Path, output: &Path, format: ModelFormat) -> Result<()> {
 }
 
 #[allow(clippy::too_many_arguments)]
-fn synth(
-    preset: Preset,
-    seed: u64,
-    views: usize,
-    size: (u32, u32),
-    points: usize,
-    noise: f64,
-    outliers: f64,
-    no_points: bool,
-    checkerboard: Option<f64>,
-    out: &Path,
-) -> Result<()> {
-    let options = SynthOptions {
-        checkerboard,
-        preset,
-        seed,
-        views,
-        width: size.0,
-        height: size.1,
-        with_points: !no_points,
-        target_points: points,
-        position_noise: noise,
-        outlier_fraction: outliers,
-        ..SynthOptions::default()
-    };
+fn synth(options: &SynthOptions, out: &Path) -> Result<()> {
     let progress = BarProgress::new();
-    let summary = write_dataset(&options, out, &progress)
+    let summary = write_dataset(options, out, &progress)
         .with_context(|| format!("writing synthetic dataset {}", out.display()))?;
     progress.bar.finish_and_clear();
     eprintln!(
@@ -1882,17 +1862,23 @@ fn main() -> Result<()> {
             outliers,
             no_points,
             checkerboard,
+            backdrop,
             out,
         } => synth(
-            *preset,
-            *seed,
-            *views,
-            *size,
-            *points,
-            *noise,
-            *outliers,
-            *no_points,
-            *checkerboard,
+            &SynthOptions {
+                checkerboard: *checkerboard,
+                backdrop: *backdrop,
+                preset: *preset,
+                seed: *seed,
+                views: *views,
+                width: size.0,
+                height: size.1,
+                with_points: !*no_points,
+                target_points: *points,
+                position_noise: *noise,
+                outlier_fraction: *outliers,
+                ..SynthOptions::default()
+            },
             out,
         ),
         Command::Sfm {

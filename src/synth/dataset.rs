@@ -24,7 +24,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::plant::{Preset, SynthPlant, generate_plant};
-use super::scene::{Part, SynthScene, build_scene};
+use super::scene::{Backdrop, Part, SynthScene, build_scene};
 use crate::render::{Lighting, RenderError, RenderOutput, Renderer, ViewCamera};
 use crate::scene::model::{Image, Keypoint, Point3D, Reconstruction, TrackElement};
 use crate::scene::ply::{Column, Element, Ply, ScalarType, encode_ply_binary};
@@ -57,6 +57,9 @@ pub struct SynthOptions {
     /// reference; `scene::CHECKERBOARD_SQUARES` squares), or none.
     #[serde(default)]
     pub checkerboard: Option<f64>,
+    /// What surrounds the plant: a patterned floor and wall, or a cabin's plain dark cloth.
+    #[serde(default)]
+    pub backdrop: Backdrop,
 }
 
 impl Default for SynthOptions {
@@ -73,6 +76,7 @@ impl Default for SynthOptions {
             outlier_fraction: 0.005,
             keypoint_noise_px: 0.3,
             checkerboard: None,
+            backdrop: Backdrop::Patterned,
         }
     }
 }
@@ -266,7 +270,13 @@ pub fn write_dataset(
     let (camera, poses) = ring_cameras(&plant, options.views, options.width, options.height);
     let camera_distance = (poses[0].inverse() * Point3::origin()).coords.norm();
     let backdrop_radius = (2.2 * camera_distance).max(1.5);
-    let scene = build_scene(&plant, backdrop_radius, options.seed, options.checkerboard);
+    let scene = build_scene(
+        &plant,
+        backdrop_radius,
+        options.seed,
+        options.checkerboard,
+        options.backdrop,
+    );
     lap("generate", &mut timings);
 
     // Render every view.

@@ -14,7 +14,7 @@ pub mod texture;
 
 pub use dataset::{SynthError, SynthOptions, SynthSummary, write_dataset};
 pub use plant::{Preset, SynthPlant, generate_plant};
-pub use scene::Part;
+pub use scene::{Backdrop, Part};
 
 use crate::model::{ModelLeaf, PlantModel};
 use crate::util::rng::Rng;

@@ -1,5 +1,6 @@
-//! The synthetic scene around a plant: pot with soil, a tiled floor and a textured backdrop,
-//! with an object id per surface and the part each id belongs to.
+//! The synthetic scene around a plant: pot with soil, a floor and a backdrop (patterned, or the
+//! plain dark cloth of a phenotyping cabin), with an object id per surface and the part each id
+//! belongs to.
 
 use image::RgbaImage;
 use nalgebra::{Point3, Vector3};
@@ -49,6 +50,47 @@ impl Part {
     /// Whether the part belongs to the plant itself.
     pub fn is_plant(self) -> bool {
         matches!(self, Part::Leaf | Part::Stem)
+    }
+}
+
+/// What surrounds the plant on the floor and behind it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Backdrop {
+    /// A terrazzo floor and a patterned wall: texture everywhere, so stereo matches the
+    /// background behind every thin organ.
+    #[default]
+    Patterned,
+    /// A phenotyping cabin: dark matte cloth on the floor and the wall (as in ROMI's scanner).
+    /// Nothing behind a stem for stereo to match, the case where semi-global matching smears
+    /// the stem's depth into a halo beside it.
+    Studio,
+}
+
+impl Backdrop {
+    pub const ALL: [Backdrop; 2] = [Backdrop::Patterned, Backdrop::Studio];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Backdrop::Patterned => "patterned",
+            Backdrop::Studio => "studio",
+        }
+    }
+}
+
+impl std::str::FromStr for Backdrop {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Backdrop::ALL
+            .into_iter()
+            .find(|b| b.name() == s)
+            .ok_or_else(|| format!("unknown backdrop '{s}' (patterned, studio)"))
+    }
+}
+
+impl std::fmt::Display for Backdrop {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
     }
 }
 
@@ -215,13 +257,15 @@ fn checkerboard(plant: &SynthPlant, square: f64) -> (TriMesh, RgbaImage) {
     (mesh, texture)
 }
 
-/// Builds the scene of a plant: its leaves and branches, the pot, floor and backdrop, and a
-/// checkerboard of `checkerboard` metre squares beside the pot when asked.
+/// Builds the scene of a plant: its leaves and branches, the pot, floor and backdrop (of the
+/// kind `backdrop`), and a checkerboard of `checkerboard` metre squares beside the pot when
+/// asked.
 pub fn build_scene(
     plant: &SynthPlant,
     backdrop_radius: f64,
     seed: u64,
     checkerboard_square: Option<f64>,
+    backdrop: Backdrop,
 ) -> SynthScene {
     let mut rng = Rng::seed_from(seed ^ 0x7e57_u64);
     let mut textures = Vec::new();
@@ -290,7 +334,10 @@ pub fn build_scene(
     });
     // The floor and backdrop textures each cover their surface once (no repetition), with
     // texels about as large as a pixel at the cameras' distance.
-    textures.push(texture::floor_texture(2048, &mut rng));
+    textures.push(match backdrop {
+        Backdrop::Patterned => texture::floor_texture(2048, &mut rng),
+        Backdrop::Studio => texture::cloth_texture(2048, 2048, &mut rng),
+    });
     objects.push(SceneObject {
         object_id: 200_003,
         part: Part::Floor,
@@ -311,7 +358,10 @@ pub fn build_scene(
             texture: textures.len() - 1,
         });
     }
-    textures.push(texture::backdrop_texture(4096, 1024, &mut rng));
+    textures.push(match backdrop {
+        Backdrop::Patterned => texture::backdrop_texture(4096, 1024, &mut rng),
+        Backdrop::Studio => texture::cloth_texture(4096, 1024, &mut rng),
+    });
     let wall_height = 1.6 * backdrop_radius;
     let backdrop = revolve(
         &[(backdrop_radius, 0.0), (backdrop_radius, wall_height)],
@@ -349,7 +399,7 @@ mod tests {
     #[test]
     fn scene_ids_are_unique_and_parts_consistent() {
         let plant = generate_plant(Preset::Broadleaf, 1);
-        let scene = build_scene(&plant, 2.0, 1, None);
+        let scene = build_scene(&plant, 2.0, 1, None, Backdrop::Patterned);
         let mut ids: Vec<u32> = scene.objects.iter().map(|o| o.object_id).collect();
         ids.sort_unstable();
         ids.dedup();

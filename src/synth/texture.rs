@@ -277,6 +277,19 @@ pub fn backdrop_texture(width: u32, height: u32, rng: &mut Rng) -> RgbaImage {
     image
 }
 
+/// Dark matte cloth as phenotyping cabins hang behind and under the plant: soft folds of a few
+/// percent of its brightness and a fine weave, nothing a feature or stereo matcher can lock on
+/// to.
+pub fn cloth_texture(width: u32, height: u32, rng: &mut Rng) -> RgbaImage {
+    let folds = Fbm::new(6, 3, rng);
+    let mut image = fill(width, height, |u, v| {
+        let f = folds.sample(u, v);
+        hsv_to_rgb(225.0, 0.15, 0.10 + 0.04 * f)
+    });
+    add_grain(&mut image, 0.04, rng);
+    image
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -311,5 +324,33 @@ mod tests {
             img.pixels().map(|p| p[c] as f64).sum::<f64>() / img.pixels().len() as f64
         };
         assert!(mean(&a, 1) > mean(&a, 0) && mean(&a, 1) > mean(&a, 2));
+    }
+
+    #[test]
+    fn cloth_is_dark_and_nearly_textureless_beside_the_patterned_wall() {
+        let mut rng = Rng::seed_from(3);
+        let cloth = cloth_texture(512, 256, &mut rng);
+        let wall = backdrop_texture(512, 256, &mut rng);
+        let luma = |p: &image::Rgba<u8>| (p[0] as f64 + p[1] as f64 + p[2] as f64) / 3.0;
+        let mean =
+            |img: &RgbaImage| img.pixels().map(luma).sum::<f64>() / img.pixels().len() as f64;
+        // Texture a matcher sees: mean absolute difference of neighbouring texels.
+        let detail = |img: &RgbaImage| {
+            let (w, h) = img.dimensions();
+            let mut sum = 0.0;
+            for y in 0..h {
+                for x in 1..w {
+                    sum += (luma(img.get_pixel(x, y)) - luma(img.get_pixel(x - 1, y))).abs();
+                }
+            }
+            sum / ((w - 1) * h) as f64
+        };
+        assert!(mean(&cloth) < 0.2 * 255.0, "cloth mean {}", mean(&cloth));
+        assert!(mean(&wall) > 2.0 * mean(&cloth));
+        let (cloth_detail, wall_detail) = (detail(&cloth), detail(&wall));
+        assert!(
+            cloth_detail < 0.5 && cloth_detail < 0.1 * wall_detail,
+            "cloth {cloth_detail}, wall {wall_detail}"
+        );
     }
 }
