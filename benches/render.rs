@@ -7,7 +7,7 @@ use std::hint::black_box;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use frond::render::{Lighting, Renderer, ViewCamera};
 use frond::synth::dataset::ring_cameras;
-use frond::synth::scene::{Part, build_scene};
+use frond::synth::scene::{Backdrop, Part, build_scene};
 use frond::synth::{Preset, generate_plant};
 
 fn render_views(c: &mut Criterion) {
@@ -18,7 +18,7 @@ fn render_views(c: &mut Criterion) {
     group.throughput(Throughput::Elements(1));
     for preset in Preset::ALL {
         let plant = generate_plant(preset, 1);
-        let scene = build_scene(&plant, 2.5, 1, None);
+        let scene = build_scene(&plant, 2.5, 1, None, Backdrop::Patterned);
         let (camera, poses) = ring_cameras(&plant, 36, 800, 600);
         let view = ViewCamera::from_colmap(&camera, &poses[3], 0.02, 10.0).expect("pinhole");
         for (label, keep) in [("environment_only", false), ("full", true)] {
