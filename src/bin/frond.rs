@@ -828,6 +828,12 @@ struct DensifyArgs {
     /// on the point or past it.
     #[arg(long, default_value_t = 0.5)]
     free_space_share: f64,
+    /// Backdrop carving: when the photos' borders show a plain backdrop (a cabin's cloth), a
+    /// stereo point is dropped when at least this many photos see that backdrop where it
+    /// projects, as they do through the halo beside thin stems (0: off; a patterned
+    /// background turns it off by itself).
+    #[arg(long, default_value_t = 2)]
+    backdrop_views: usize,
 }
 
 impl DensifyArgs {
@@ -870,6 +876,7 @@ impl DensifyArgs {
             bail!("--free-space-share must be between 0 and 1");
         }
         options.free_space.share = self.free_space_share;
+        options.backdrop.min_views = self.backdrop_views;
         options.fusion.pixel_step = self.pixel_step;
         if self.voxel_pixels.is_nan() || self.voxel_pixels < 0.5 {
             bail!("--voxel-pixels must be at least 0.5");

@@ -15,6 +15,7 @@
 //! Takes a [`Scene`](crate::scene::Scene) with a sparse model and its photos; returns
 //! [`FusedPoints`] and a [`DensifyReport`], and writes the dense workspace.
 
+pub mod backdrop;
 pub mod fusion;
 pub mod pairs;
 pub mod rectify;
@@ -28,6 +29,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::Serialize;
 
+pub use backdrop::{BackdropModel, BackdropOptions};
 pub use fusion::{FreeSpaceOptions, FusedPoints, FusionOptions, FusionStats, RegionOfInterest};
 pub use pairs::{PairOptions, StereoPair};
 pub use stereo::{RectifiedDepthMap, StereoOptions};
@@ -56,6 +58,8 @@ pub struct DensifyOptions {
     pub thin: ThinOptions,
     /// Fused points that depth maps see past are dropped ([`fusion::seen_through`]).
     pub free_space: FreeSpaceOptions,
+    /// Fused points that photos see the plain backdrop through are dropped ([`backdrop`]).
+    pub backdrop: BackdropOptions,
 }
 
 impl Default for DensifyOptions {
@@ -68,6 +72,7 @@ impl Default for DensifyOptions {
             fusion: FusionOptions::default(),
             thin: ThinOptions::default(),
             free_space: FreeSpaceOptions::default(),
+            backdrop: BackdropOptions::default(),
         }
     }
 }
@@ -133,6 +138,11 @@ pub struct DensifyReport {
     /// ([`FreeSpaceOptions`]).
     #[serde(default)]
     pub free_space_dropped: usize,
+    /// What the photos' borders said about the backdrop (none when carving is off).
+    pub backdrop: Option<BackdropModel>,
+    /// Stereo points dropped as lying where photos see the plain backdrop
+    /// ([`BackdropOptions`]).
+    pub backdrop_dropped: usize,
     pub mean_views_per_point: f64,
     pub timings: BTreeMap<String, f64>,
 }
@@ -291,6 +301,38 @@ pub fn densify(
         report
             .timings
             .insert("free_space".to_owned(), started.elapsed().as_secs_f64());
+    }
+    if options.backdrop.min_views > 0 {
+        let started = Instant::now();
+        progress.stage("backdrop", 0);
+        let views: Vec<backdrop::CarvingView> = loaded
+            .iter()
+            .map(|(position, view)| {
+                backdrop::CarvingView::new(&scene.reconstruction, *position, view).map_err(|e| {
+                    image_error(
+                        &scene.reconstruction.images()[*position],
+                        format!("reading its pixels: {e}"),
+                    )
+                })
+            })
+            .collect::<Result<_, _>>()?;
+        let model = BackdropModel::learn(
+            views.iter().map(|v| (v.rgb.as_slice(), v.width, v.height)),
+            &options.backdrop,
+        );
+        let sightings = backdrop::backdrop_sightings(&fused.positions_world, &views, &model);
+        // The thin-organ sweep's points are exempt, as from the free-space check.
+        let keep: Vec<bool> = sightings
+            .iter()
+            .zip(&fused.thin_organ)
+            .map(|(&seen, &thin)| thin || (seen as usize) < options.backdrop.min_views)
+            .collect();
+        report.backdrop_dropped = keep.iter().filter(|&&k| !k).count();
+        report.backdrop = Some(model);
+        fused = thin::select(fused, &keep);
+        report
+            .timings
+            .insert("backdrop".to_owned(), started.elapsed().as_secs_f64());
     }
     report.mean_views_per_point = if fused.is_empty() {
         0.0
