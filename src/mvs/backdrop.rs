@@ -11,7 +11,10 @@
 //!
 //! The backdrop's colours are learnt from the photos' borders (top, left and right bands; the
 //! pot often stands on the bottom one), pooled over all photos so that an organ crossing the
-//! border in a few of them stays a minority. Colours are binned in cells of [`CELL`] levels per
+//! border in a few of them stays a minority. A border pixel whose ray passes through the box
+//! the fused points span ([`PlantBox`]) may show the plant and is not learnt from: a close-up
+//! whose leaves fill the frame leaves too few border pixels ([`MIN_LEARNT_SHARE`]) and carves
+//! nothing, instead of taking the leaves' green for the backdrop. Colours are binned in cells of [`CELL`] levels per
 //! channel; the most frequent cells that together hold [`BackdropOptions::border_share`] of the
 //! border pixels are the backdrop, plus their neighbouring cells (tolerance for shading and
 //! noise). The backdrop counts as plain only when that takes at most
@@ -19,12 +22,67 @@
 //! and then nothing is carved. A pixel is backdrop only when its 3 × 3 neighbourhood is, so a
 //! point a pixel off a thin organ (calibration, resampling) still lands on it.
 
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::stereo::LoadedView;
 use crate::scene::Reconstruction;
+
+/// Least share of the border pixels that must lie off the plant's box for a model to be learnt.
+pub const MIN_LEARNT_SHARE: f64 = 0.2;
+
+/// An axis-aligned box (world frame) holding the plant: the 2nd–98th percentiles of the fused
+/// points per axis, widened by 5 % of its size on each side.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlantBox {
+    pub min_world: Point3<f64>,
+    pub max_world: Point3<f64>,
+}
+
+impl PlantBox {
+    /// The box of `points_world` (none for fewer than 10 points).
+    pub fn of(points_world: &[Point3<f64>]) -> Option<Self> {
+        if points_world.len() < 10 {
+            return None;
+        }
+        let mut min_world = Point3::origin();
+        let mut max_world = Point3::origin();
+        for axis in 0..3 {
+            let mut values: Vec<f64> = points_world.iter().map(|p| p[axis]).collect();
+            values.sort_by(f64::total_cmp);
+            let lo = values[values.len() * 2 / 100];
+            let hi = values[(values.len() * 98 / 100).min(values.len() - 1)];
+            let margin = 0.05 * (hi - lo);
+            min_world[axis] = lo - margin;
+            max_world[axis] = hi + margin;
+        }
+        Some(Self {
+            min_world,
+            max_world,
+        })
+    }
+
+    /// Whether the ray from `origin_world` along `direction_world` (forward only) crosses the
+    /// box (slab test).
+    pub fn crossed_by(&self, origin_world: &Point3<f64>, direction_world: &Vector3<f64>) -> bool {
+        let (mut enter, mut leave) = (0.0f64, f64::INFINITY);
+        for axis in 0..3 {
+            let (o, d) = (origin_world[axis], direction_world[axis]);
+            let (lo, hi) = (self.min_world[axis], self.max_world[axis]);
+            if d.abs() < 1e-15 {
+                if o < lo || o > hi {
+                    return false;
+                }
+                continue;
+            }
+            let (a, b) = ((lo - o) / d, (hi - o) / d);
+            enter = enter.max(a.min(b));
+            leave = leave.min(a.max(b));
+        }
+        enter <= leave
+    }
+}
 
 /// Colour levels per cell side (8-bit channels: 32 cells per channel).
 pub const CELL: u8 = 8;
@@ -57,8 +115,10 @@ impl Default for BackdropOptions {
 /// What the photos' borders said about the backdrop.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct BackdropModel {
-    /// Border pixels looked at.
+    /// Border pixels learnt from.
     pub border_pixels: usize,
+    /// Border pixels left out because their rays cross the plant's box.
+    pub border_pixels_on_plant: usize,
     /// Colour cells holding [`BackdropOptions::border_share`] of them.
     pub cells: usize,
     /// Whether that is few enough for a plain backdrop (otherwise nothing is carved).
@@ -76,15 +136,17 @@ fn cell_of(rgb: [u8; 3]) -> usize {
 
 impl BackdropModel {
     /// Learns the backdrop's colours from the border bands of `images` (RGB rows of
-    /// `width × height` pixels).
+    /// `width × height` pixels), leaving out the pixels `on_plant(image, x, y)` says may show
+    /// the plant (`image` counts the images from 0).
     pub fn learn<'a>(
         images: impl IntoIterator<Item = (&'a [[u8; 3]], usize, usize)>,
+        on_plant: impl Fn(usize, usize, usize) -> bool,
         options: &BackdropOptions,
     ) -> Self {
         let mut counts = vec![0usize; CELLS_PER_CHANNEL.pow(3)];
         let mut sums = vec![[0.0f64; 3]; counts.len()];
-        let mut total = 0usize;
-        for (rgb, width, height) in images {
+        let (mut total, mut left_out) = (0usize, 0usize);
+        for (index, (rgb, width, height)) in images.into_iter().enumerate() {
             if width == 0 || height == 0 || rgb.len() != width * height {
                 continue;
             }
@@ -93,6 +155,10 @@ impl BackdropModel {
             for y in 0..height {
                 for x in 0..width {
                     if y >= band && x >= band && x + band < width {
+                        continue;
+                    }
+                    if on_plant(index, x, y) {
+                        left_out += 1;
                         continue;
                     }
                     let pixel = rgb[y * width + x];
@@ -116,7 +182,9 @@ impl BackdropModel {
             held += counts[c];
             chosen.push(c);
         }
-        let plain = total > 0 && chosen.len() <= options.max_cells;
+        let learnt_enough =
+            total > 0 && total as f64 >= MIN_LEARNT_SHARE * (total + left_out) as f64;
+        let plain = learnt_enough && chosen.len() <= options.max_cells;
         let mut mean_rgb = [0.0; 3];
         for &c in &chosen {
             for k in 0..3 {
@@ -142,6 +210,7 @@ impl BackdropModel {
         }
         Self {
             border_pixels: total,
+            border_pixels_on_plant: left_out,
             cells: chosen.len(),
             plain,
             mean_rgb,
@@ -191,6 +260,19 @@ impl<'a> CarvingView<'a> {
             width: mat.cols() as usize,
             height: mat.rows() as usize,
         })
+    }
+
+    /// The world ray (camera centre, direction) through loaded pixel `(x, y)`.
+    pub fn ray(&self, x: usize, y: usize) -> Option<(Point3<f64>, Vector3<f64>)> {
+        let uv = nalgebra::Point2::new(
+            (x as f64 + 0.5) / self.scale.0,
+            (y as f64 + 0.5) / self.scale.1,
+        );
+        let direction_camera = self.camera.unproject(&uv)?;
+        Some((
+            self.image.center_world(),
+            self.image.camera_from_world.rotation.inverse() * direction_camera,
+        ))
     }
 
     /// Whether the photo sees the backdrop all around where `point_world` projects (false
@@ -262,6 +344,7 @@ mod tests {
         let photos: Vec<Vec<[u8; 3]>> = (0..6).map(cabin).collect();
         let model = BackdropModel::learn(
             photos.iter().map(|p| (p.as_slice(), 200, 150)),
+            |_, _, _| false,
             &BackdropOptions::default(),
         );
         assert!(model.plain, "{model:?}");
@@ -294,6 +377,7 @@ mod tests {
             .collect();
         let model = BackdropModel::learn(
             photos.iter().map(|p| (p.as_slice(), 200, 150)),
+            |_, _, _| false,
             &BackdropOptions::default(),
         );
         assert!(!model.plain, "{} cells", model.cells);
@@ -307,7 +391,11 @@ mod tests {
 
     #[test]
     fn no_photos_learn_nothing() {
-        let model = BackdropModel::learn(std::iter::empty(), &BackdropOptions::default());
+        let model = BackdropModel::learn(
+            std::iter::empty(),
+            |_, _, _| false,
+            &BackdropOptions::default(),
+        );
         assert!(!model.plain);
         assert_eq!(model.border_pixels, 0);
         // A malformed image (wrong pixel count) is skipped, not indexed out of bounds.
@@ -315,5 +403,49 @@ mod tests {
         let model =
             BackdropModel::learn([(short.as_slice(), 200, 150)], &BackdropOptions::default());
         assert_eq!(model.border_pixels, 0);
+    }
+
+    /// A close-up whose leaves fill the frame: uniform green all around the border would pass
+    /// for a plain backdrop, but its rays cross the plant's box and are not learnt from.
+    #[test]
+    fn a_border_the_plant_fills_is_not_taken_for_the_backdrop() {
+        let photos: Vec<Vec<[u8; 3]>> = (0..4)
+            .map(|s| {
+                image(200, 150, move |x, y| {
+                    [50, 120 + ((x + y + s) % 4) as u8, 40]
+                })
+            })
+            .collect();
+        let images = || photos.iter().map(|p| (p.as_slice(), 200usize, 150usize));
+        let options = BackdropOptions::default();
+        let naive = BackdropModel::learn(images(), |_, _, _| false, &options);
+        assert!(naive.plain && naive.is_backdrop([50, 121, 40]), "{naive:?}");
+        // Only the top-left corner's rays miss the plant: under a fifth of the border.
+        let model = BackdropModel::learn(images(), |_, x, y| x > 20 || y > 20, &options);
+        assert!(!model.plain, "{model:?}");
+        assert!(model.border_pixels_on_plant > 4 * model.border_pixels);
+        assert!(!model.is_backdrop([50, 121, 40]));
+    }
+
+    #[test]
+    fn rays_cross_the_plant_box_or_pass_it() {
+        let plant = PlantBox {
+            min_world: Point3::new(-1.0, -1.0, -1.0),
+            max_world: Point3::new(1.0, 1.0, 1.0),
+        };
+        let eye = Point3::new(0.0, 0.0, -5.0);
+        assert!(plant.crossed_by(&eye, &Vector3::new(0.0, 0.0, 1.0)));
+        assert!(plant.crossed_by(&eye, &Vector3::new(0.15, 0.15, 1.0)));
+        assert!(!plant.crossed_by(&eye, &Vector3::new(0.3, 0.0, 1.0)));
+        assert!(
+            !plant.crossed_by(&eye, &Vector3::new(0.0, 0.0, -1.0)),
+            "behind the eye"
+        );
+        let inside = Point3::new(0.5, 0.0, 0.0);
+        assert!(plant.crossed_by(&inside, &Vector3::new(1.0, 0.0, 0.0)));
+        let points: Vec<Point3<f64>> = (0..100).map(|k| Point3::new(k as f64, 0.0, 0.0)).collect();
+        let of = PlantBox::of(&points).unwrap();
+        assert!((of.min_world.x - (2.0 - 4.8)).abs() < 1e-9, "{of:?}");
+        assert!(PlantBox::of(&points[..5]).is_none());
     }
 }

@@ -316,8 +316,17 @@ pub fn densify(
                 })
             })
             .collect::<Result<_, _>>()?;
+        // Border pixels whose rays cross the box the fused points span may show the plant.
+        let plant = backdrop::PlantBox::of(&fused.positions_world);
         let model = BackdropModel::learn(
             views.iter().map(|v| (v.rgb.as_slice(), v.width, v.height)),
+            |index, x, y| {
+                plant.is_some_and(|b| {
+                    views[index]
+                        .ray(x, y)
+                        .is_none_or(|(origin, direction)| b.crossed_by(&origin, &direction))
+                })
+            },
             &options.backdrop,
         );
         let sightings = backdrop::backdrop_sightings(&fused.positions_world, &views, &model);
