@@ -400,8 +400,11 @@ mod tests {
         assert_eq!(model.border_pixels, 0);
         // A malformed image (wrong pixel count) is skipped, not indexed out of bounds.
         let short = vec![[0u8; 3]; 10];
-        let model =
-            BackdropModel::learn([(short.as_slice(), 200, 150)], &BackdropOptions::default());
+        let model = BackdropModel::learn(
+            [(short.as_slice(), 200, 150)],
+            |_, _, _| false,
+            &BackdropOptions::default(),
+        );
         assert_eq!(model.border_pixels, 0);
     }
 
