@@ -30,7 +30,7 @@ use super::stereo::LoadedView;
 use crate::scene::Reconstruction;
 
 /// Least share of the border pixels that must lie off the plant's box for a model to be learnt.
-pub const MIN_LEARNT_SHARE: f64 = 0.2;
+pub const MIN_LEARNT_SHARE: f64 = 0.1;
 
 /// An axis-aligned box (world frame) holding the plant: the 2nd–98th percentiles of the fused
 /// points per axis, widened by 5 % of its size on each side.
@@ -423,7 +423,7 @@ mod tests {
         let options = BackdropOptions::default();
         let naive = BackdropModel::learn(images(), |_, _, _| false, &options);
         assert!(naive.plain && naive.is_backdrop([50, 121, 40]), "{naive:?}");
-        // Only the top-left corner's rays miss the plant: under a fifth of the border.
+        // Only the top-left corner's rays miss the plant: under a tenth of the border.
         let model = BackdropModel::learn(images(), |_, x, y| x > 20 || y > 20, &options);
         assert!(!model.plain, "{model:?}");
         assert!(model.border_pixels_on_plant > 4 * model.border_pixels);
