@@ -287,7 +287,10 @@ impl<'a> CarvingView<'a> {
         };
         let (x, y) = (uv.x * self.scale.0 - 0.5, uv.y * self.scale.1 - 0.5);
         let (x, y) = (x.round(), y.round());
-        if x < 1.0 || y < 1.0 || x + 1.0 >= self.width as f64 || y + 1.0 >= self.height as f64 {
+        // Written so that a NaN (a degenerate projection) also returns.
+        let inside =
+            x >= 1.0 && y >= 1.0 && x + 1.0 < self.width as f64 && y + 1.0 < self.height as f64;
+        if !inside {
             return false;
         }
         let (x, y) = (x as usize, y as usize);
