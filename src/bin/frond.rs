@@ -1196,7 +1196,6 @@ fn convert(input: &Path, output: &Path, format: ModelFormat) -> Result<()> {
     Ok(())
 }
 
-#[allow(clippy::too_many_arguments)]
 fn synth(options: &SynthOptions, out: &Path) -> Result<()> {
     let progress = BarProgress::new();
     let summary = write_dataset(options, out, &progress)
