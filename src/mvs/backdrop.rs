@@ -244,21 +244,13 @@ impl<'a> CarvingView<'a> {
     ) -> opencv::Result<Self> {
         use opencv::prelude::*;
         let image = &model.images()[position];
-        let copy;
-        let mat = if view.bgr.is_continuous() {
-            &view.bgr
-        } else {
-            copy = view.bgr.try_clone()?;
-            &copy
-        };
-        let bgr: &[opencv::core::Vec3b] = mat.data_typed()?;
         Ok(Self {
             image,
             camera: model.camera_of(image),
             scale: view.scale,
-            rgb: bgr.iter().map(|p| [p[2], p[1], p[0]]).collect(),
-            width: mat.cols() as usize,
-            height: mat.rows() as usize,
+            rgb: view.rgb()?,
+            width: view.bgr.cols() as usize,
+            height: view.bgr.rows() as usize,
         })
     }
 

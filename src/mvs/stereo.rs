@@ -93,6 +93,21 @@ pub fn disparity_range(disparities: &[f64], margin: f64, max_count: i32) -> Opti
     Some((i32::try_from(min).ok()?, count))
 }
 
+impl LoadedView {
+    /// Its pixels as RGB, row-major.
+    pub fn rgb(&self) -> opencv::Result<Vec<[u8; 3]>> {
+        let copy;
+        let mat = if self.bgr.is_continuous() {
+            &self.bgr
+        } else {
+            copy = self.bgr.try_clone()?;
+            &copy
+        };
+        let bgr: &[opencv::core::Vec3b] = mat.data_typed()?;
+        Ok(bgr.iter().map(|p| [p[2], p[1], p[0]]).collect())
+    }
+}
+
 fn remap(
     view: &LoadedView,
     map: &ResamplingTable,

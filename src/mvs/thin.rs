@@ -455,18 +455,6 @@ impl SweepView<'_> {
     }
 }
 
-fn rgb_of(view: &LoadedView) -> opencv::Result<Vec<[u8; 3]>> {
-    let copy;
-    let mat = if view.bgr.is_continuous() {
-        &view.bgr
-    } else {
-        copy = view.bgr.try_clone()?;
-        &copy
-    };
-    let bgr: &[opencv::core::Vec3b] = mat.data_typed()?;
-    Ok(bgr.iter().map(|p| [p[2], p[1], p[0]]).collect())
-}
-
 /// The camera-z depths of the sparse points an image observes: 2nd–98th percentile, widened
 /// by 10 %.
 fn depth_range(model: &Reconstruction, position: usize) -> Option<(f64, f64)> {
@@ -501,7 +489,7 @@ pub fn sweep(
     let views: Vec<SweepView> = loaded
         .par_iter()
         .map(|(position, view)| {
-            let rgb = rgb_of(view)?;
+            let rgb = view.rgb()?;
             let (width, height) = (view.bgr.cols() as usize, view.bgr.rows() as usize);
             let image = &images[*position];
             Ok(SweepView {
