@@ -4,14 +4,17 @@
 //! (rectification + semi-global matching, the baseline every pairwise-stereo method pays) and
 //! the fusion alone on those maps, and the full `densify` with the short-bar option, with
 //! two stereo partners per view and without the fill partner (the default fuses one partner's
-//! maps, then both partners' maps for the gap fills).
+//! maps, then both partners' maps for the gap fills). The halo checks (the free-space check and
+//! the backdrop carving) are measured by the full run without them, and by the same plant
+//! photographed against the studio's plain cloth, where the carving has a backdrop to carve
+//! against (on the patterned default it learns that the backdrop is not plain and stops).
 
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use frond::mvs::{DensifyOptions, densify, depth_maps, fusion};
 use frond::scene::Scene;
-use frond::synth::{Preset, SynthOptions, write_dataset};
+use frond::synth::{Backdrop, Preset, SynthOptions, write_dataset};
 use frond::util::progress::NoProgress;
 
 fn dense(c: &mut Criterion) {
@@ -26,6 +29,13 @@ fn dense(c: &mut Criterion) {
     write_dataset(&options, &root, &NoProgress).expect("synthetic dataset");
     let scene = Scene::open(&root).expect("scene");
     let densify_options = DensifyOptions::default();
+    let studio_root = dir.path().join("studio");
+    let studio_options = SynthOptions {
+        backdrop: Backdrop::Studio,
+        ..options.clone()
+    };
+    write_dataset(&studio_options, &studio_root, &NoProgress).expect("studio dataset");
+    let studio = Scene::open(&studio_root).expect("studio scene");
     let (maps, report) = depth_maps(&scene, &densify_options, &NoProgress).expect("depth maps");
 
     let mut group = c.benchmark_group("densify_broadleaf_36x800x600");
@@ -52,6 +62,20 @@ fn dense(c: &mut Criterion) {
     no_fill.pairs.fill_partners_per_view = 0;
     group.bench_function("full_no_fill", |b| {
         b.iter(|| black_box(densify(&scene, &no_fill, &NoProgress).expect("densify")))
+    });
+    // Neither halo check (`--free-space-maps 0 --backdrop-views 0`): what the two cost.
+    let mut no_halo_checks = densify_options;
+    no_halo_checks.free_space.min_maps = 0;
+    no_halo_checks.backdrop.min_views = 0;
+    group.bench_function("full_no_halo_checks", |b| {
+        b.iter(|| black_box(densify(&scene, &no_halo_checks, &NoProgress).expect("densify")))
+    });
+    // The same plant before the studio's plain cloth: the backdrop carving runs.
+    group.bench_function("studio_full", |b| {
+        b.iter(|| black_box(densify(&studio, &densify_options, &NoProgress).expect("densify")))
+    });
+    group.bench_function("studio_no_halo_checks", |b| {
+        b.iter(|| black_box(densify(&studio, &no_halo_checks, &NoProgress).expect("densify")))
     });
     // The depth maps of both partners (the default's) and their fusion in one.
     group.bench_function("depth_maps_only", |b| {
