@@ -819,9 +819,7 @@ fn bridge_pieces(
                 let drawn = bridge_share.get(&branch.id).copied().unwrap_or(0.0);
                 let on_piece = index >= tree_count;
                 let from = if on_piece {
-                    drawn.max(
-                        1.0 - TIP_LEVELS * level_width / branch.cylinder.length().max(1e-12),
-                    )
+                    drawn.max(1.0 - TIP_LEVELS * level_width / branch.cylinder.length().max(1e-12))
                 } else {
                     drawn
                 };
@@ -2956,8 +2954,7 @@ mod tests {
             .iter()
             .map(|&(azimuth, length): &(f64, f64)| {
                 let a = azimuth.to_radians();
-                hub + Vector3::new(a.cos() * rise.cos(), a.sin() * rise.cos(), rise.sin())
-                    * length
+                hub + Vector3::new(a.cos() * rise.cos(), a.sin() * rise.cos(), rise.sin()) * length
             })
             .collect();
         for tip in &tips {
