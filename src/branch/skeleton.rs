@@ -854,11 +854,8 @@ fn bridge_pieces(
         // one it follows, and the way back to the tree is where they converge, from the
         // piece's centroid through its root.
         if best.is_none() && sub_branches.len() > 1 {
-            let centroid = piece_points
-                .iter()
-                .fold(Vector3::zeros(), |sum, p| sum + p.coords)
-                / piece_points.len() as f64;
-            if let Some(converging) = (origin.coords - centroid).try_normalize(1e-12)
+            let centroid = Shape::of(piece_points.iter().copied()).centroid;
+            if let Some(converging) = (origin - centroid).try_normalize(1e-12)
                 && converging.dot(up) <= 0.0
             {
                 tracing::debug!(?backward, ?converging, "a forked piece's way back");
